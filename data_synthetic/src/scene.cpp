@@ -1,0 +1,287 @@
+// The framed painting as an Embree scene in the canvas frame (see scan_sim.h for the geometry).
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <sstream>
+#include <string>
+
+#include "digitize_synth/scan_sim.h"
+
+namespace digitize::synth {
+namespace {
+
+// Canvas grid primitives cover at most this many quads per side (Embree's limit is 32767
+// vertices; smaller pieces also give the BVH builder parallel work).
+constexpr int kGridCells = 256;
+constexpr size_t kRayBatch = 256;  // rays per rtcIntersect1M call
+
+// Frame moulding profile: (distance outwards from the canvas edge as a share of width_mm,
+// height as a share of raise_mm). First and last points are replaced by the wall depth: the inner
+// step and the outer face go down to the wall. Sight edge, a cove, a rounded top, a fall outwards.
+constexpr std::array<std::array<double, 2>, 10> kProfile = {{{0.0, 0.0},
+                                                              {0.0, 1.0},
+                                                              {0.10, 1.0},
+                                                              {0.18, 0.86},
+                                                              {0.30, 0.82},
+                                                              {0.45, 0.90},
+                                                              {0.62, 0.98},
+                                                              {0.78, 0.93},
+                                                              {1.0, 0.70},
+                                                              {1.0, 0.0}}};
+
+void ErrorCallback(void* user, RTCError code, const char* message) {
+  auto* last = static_cast<std::string*>(user);
+  *last = "Embree error " + std::to_string(static_cast<int>(code)) + ": " +
+          (message ? message : "(no message)");
+}
+
+std::string Num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+}  // namespace
+
+Status FrameOptions::Validate() const {
+  auto fail = [](const std::string& what) { return Status(Error{"frame options: " + what}); };
+  if (!(std::isfinite(raise_mm) && raise_mm > 0 && raise_mm <= 1000))
+    return fail("raise_mm must be in (0, 1000], got " + Num(raise_mm));
+  if (!(std::isfinite(width_mm) && width_mm > 0 && width_mm <= 1000))
+    return fail("width_mm must be in (0, 1000], got " + Num(width_mm));
+  if (!(std::isfinite(wall_depth_mm) && wall_depth_mm > 0 && wall_depth_mm <= 10000))
+    return fail("wall_depth_mm must be in (0, 10000], got " + Num(wall_depth_mm));
+  return Status::Ok();
+}
+
+struct Scene::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  std::string last_error;
+  std::vector<Hit> kind_of_geometry;  // by Embree geometry id
+
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+
+  void Check(const char* what) const {
+    RTCError e = rtcGetDeviceError(device);
+    DIGITIZE_CHECK(e == RTC_ERROR_NONE, std::string("Scene: ") + what + ": " + last_error);
+  }
+
+  void Attach(RTCGeometry geometry, Hit kind) {
+    rtcCommitGeometry(geometry);
+    unsigned id = rtcAttachGeometry(scene, geometry);
+    rtcReleaseGeometry(geometry);
+    if (kind_of_geometry.size() <= id) kind_of_geometry.resize(id + 1, Hit::kNone);
+    kind_of_geometry[id] = kind;
+  }
+
+  void AddTriangles(const std::vector<Eigen::Vector3f>& vertices,
+                    const std::vector<std::array<unsigned, 3>>& triangles, Hit kind) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertices.size()));
+    auto* t = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), triangles.size()));
+    Check("triangle buffers");
+    for (size_t i = 0; i < vertices.size(); ++i)
+      for (int k = 0; k < 3; ++k) v[3 * i + k] = vertices[i][k];
+    for (size_t i = 0; i < triangles.size(); ++i)
+      for (int k = 0; k < 3; ++k) t[3 * i + k] = triangles[i][k];
+    Attach(g, kind);
+  }
+
+  void AddCanvas(const Painting& painting) {
+    const Grid<float>& h = painting.truth.height_mm;
+    const int w = h.width, ht = h.height;
+    const double pitch = painting.truth.pitch_mm;
+    const unsigned stride = static_cast<unsigned>(w + 2);
+    const size_t rows = static_cast<size_t>(ht + 2);
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_GRID);
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), stride * rows));
+    Check("canvas vertex buffer");
+    // Vertex (c, r): c = 0 and c = w + 1 lie on the canvas outline, 1..w on the texel centres.
+    auto coord = [](int i, int n, double pitch_mm) {
+      if (i == 0) return 0.0;
+      if (i == n + 1) return n * pitch_mm;
+      return (i - 0.5) * pitch_mm;
+    };
+    tbb::parallel_for(tbb::blocked_range<int>(0, ht + 2, 64), [&](const tbb::blocked_range<int>& r) {
+      for (int row = r.begin(); row < r.end(); ++row) {
+        const float y_mm = static_cast<float>(painting.height_mm - coord(row, ht, pitch));
+        const float* src = h.Row(std::clamp(row - 1, 0, ht - 1));
+        float* dst = v + 3 * static_cast<size_t>(row) * stride;
+        for (int c = 0; c < w + 2; ++c) {
+          dst[3 * c + 0] = static_cast<float>(coord(c, w, pitch));
+          dst[3 * c + 1] = y_mm;
+          dst[3 * c + 2] = src[std::clamp(c - 1, 0, w - 1)];
+        }
+      }
+    });
+    const int cells_x = w + 1, cells_y = ht + 1;
+    const int tiles_x = (cells_x + kGridCells - 1) / kGridCells;
+    const int tiles_y = (cells_y + kGridCells - 1) / kGridCells;
+    auto* grids = static_cast<RTCGrid*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid),
+        static_cast<size_t>(tiles_x) * tiles_y));
+    Check("canvas grid buffer");
+    for (int ty = 0; ty < tiles_y; ++ty) {
+      for (int tx = 0; tx < tiles_x; ++tx) {
+        int c0 = tx * kGridCells, r0 = ty * kGridCells;
+        RTCGrid& grid = grids[static_cast<size_t>(ty) * tiles_x + tx];
+        grid.startVertexID = static_cast<unsigned>(r0) * stride + static_cast<unsigned>(c0);
+        grid.stride = stride;
+        grid.width = static_cast<unsigned short>(std::min(kGridCells, cells_x - c0) + 1);
+        grid.height = static_cast<unsigned short>(std::min(kGridCells, cells_y - r0) + 1);
+      }
+    }
+    Attach(g, Hit::kCanvas);
+  }
+
+  // A closed loop of rectangles around the canvas, one per profile point, joined by quads.
+  void AddFrame(const Painting& painting, const FrameOptions& frame) {
+    const double W = painting.width_mm, H = painting.height_mm;
+    std::vector<Eigen::Vector3f> vertices;
+    for (const auto& p : kProfile) {
+      double d = p[0] * frame.width_mm;
+      double z = p[1] == 0.0 ? -frame.wall_depth_mm : p[1] * frame.raise_mm;
+      for (const auto& corner : {Eigen::Vector2d(-d, -d), Eigen::Vector2d(W + d, -d),
+                                 Eigen::Vector2d(W + d, H + d), Eigen::Vector2d(-d, H + d)})
+        vertices.emplace_back(static_cast<float>(corner.x()), static_cast<float>(corner.y()),
+                              static_cast<float>(z));
+    }
+    std::vector<std::array<unsigned, 3>> triangles;
+    for (unsigned i = 0; i + 1 < kProfile.size(); ++i) {
+      for (unsigned k = 0; k < 4; ++k) {
+        unsigned k1 = (k + 1) % 4;
+        unsigned a = 4 * i + k, b = 4 * i + k1, c = 4 * (i + 1) + k1, d = 4 * (i + 1) + k;
+        triangles.push_back({a, b, c});
+        triangles.push_back({a, c, d});
+      }
+    }
+    AddTriangles(vertices, triangles, Hit::kFrame);
+  }
+
+  // Without a frame: the canvas's sides, from the wall up to the lowest border height (so they
+  // never poke above the canvas surface).
+  void AddCanvasSides(const Painting& painting, const FrameOptions& frame) {
+    const Grid<float>& h = painting.truth.height_mm;
+    float top = 0;
+    for (int x = 0; x < h.width; ++x) top = std::min({top, h(x, 0), h(x, h.height - 1)});
+    for (int y = 0; y < h.height; ++y) top = std::min({top, h(0, y), h(h.width - 1, y)});
+    const float W = static_cast<float>(painting.width_mm), H = static_cast<float>(painting.height_mm);
+    const float bottom = static_cast<float>(-frame.wall_depth_mm);
+    std::vector<Eigen::Vector3f> vertices = {{0, 0, bottom}, {W, 0, bottom}, {W, H, bottom},
+                                             {0, H, bottom}, {0, 0, top},    {W, 0, top},
+                                             {W, H, top},    {0, H, top}};
+    std::vector<std::array<unsigned, 3>> triangles;
+    for (unsigned k = 0; k < 4; ++k) {
+      unsigned k1 = (k + 1) % 4;
+      triangles.push_back({k, k1, 4 + k1});
+      triangles.push_back({k, 4 + k1, 4 + k});
+    }
+    AddTriangles(vertices, triangles, Hit::kFrame);
+  }
+
+  void AddWall(const Painting& painting, const FrameOptions& frame) {
+    // Far larger than any field of view a scan of this scene can have, small enough for float.
+    const float reach = static_cast<float>(20 * (painting.width_mm + painting.height_mm) + 1e4);
+    const float W = static_cast<float>(painting.width_mm), H = static_cast<float>(painting.height_mm);
+    const float z = static_cast<float>(-frame.wall_depth_mm);
+    std::vector<Eigen::Vector3f> vertices = {
+        {-reach, -reach, z}, {W + reach, -reach, z}, {W + reach, H + reach, z}, {-reach, H + reach, z}};
+    AddTriangles(vertices, {{0, 1, 2}, {0, 2, 3}}, Hit::kWall);
+  }
+};
+
+Scene::Scene(const Painting& painting, const FrameOptions& frame)
+    : painting_(painting), frame_(frame), impl_(std::make_unique<Impl>()) {
+  Status valid = frame.Validate();
+  DIGITIZE_CHECK(valid.ok(), "Scene: " + valid.message());
+  DIGITIZE_CHECK(!painting.truth.height_mm.empty(), "Scene: empty painting");
+  impl_->device = rtcNewDevice(nullptr);
+  DIGITIZE_CHECK(impl_->device != nullptr, "Scene: rtcNewDevice failed");
+  rtcSetDeviceErrorFunction(impl_->device, ErrorCallback, &impl_->last_error);
+  impl_->scene = rtcNewScene(impl_->device);
+  // Watertight intersection: without it a few rays in a million slip between canvas triangles
+  // and report the wall in the middle of the canvas.
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  impl_->Check("rtcNewScene");
+  impl_->AddCanvas(painting);
+  if (frame.enabled) {
+    impl_->AddFrame(painting, frame);
+  } else {
+    impl_->AddCanvasSides(painting, frame);
+  }
+  impl_->AddWall(painting, frame);
+  rtcCommitScene(impl_->scene);
+  impl_->Check("scene build");
+}
+
+Scene::~Scene() = default;
+
+void Scene::Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                      std::vector<RayHit>& hits) const {
+  DIGITIZE_CHECK(origins.size() == directions.size(), "Scene::Intersect: size mismatch");
+  hits.assign(origins.size(), RayHit{});
+  const size_t n = origins.size();
+  const size_t batches = (n + kRayBatch - 1) / kRayBatch;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
+    std::array<RTCRayHit, kRayBatch> rays;
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    for (size_t batch = r.begin(); batch < r.end(); ++batch) {
+      const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
+      for (size_t k = 0; k < count; ++k) {
+        const Vec3d& o = origins[first + k];
+        Vec3d d = directions[first + k];
+        double len = d.norm();
+        RTCRayHit& ray = rays[k];
+        ray.ray.org_x = static_cast<float>(o.x());
+        ray.ray.org_y = static_cast<float>(o.y());
+        ray.ray.org_z = static_cast<float>(o.z());
+        if (len > 0 && std::isfinite(len)) d /= len;
+        ray.ray.dir_x = static_cast<float>(d.x());
+        ray.ray.dir_y = static_cast<float>(d.y());
+        ray.ray.dir_z = static_cast<float>(d.z());
+        ray.ray.tnear = 0.0f;
+        // A zero or non-finite direction hits nothing.
+        ray.ray.tfar = (len > 0 && std::isfinite(len) && o.allFinite())
+                           ? std::numeric_limits<float>::infinity()
+                           : -1.0f;
+        ray.ray.time = 0.0f;
+        ray.ray.mask = 0xFFFFFFFFu;
+        ray.ray.id = static_cast<unsigned>(k);
+        ray.ray.flags = 0;
+        ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      }
+      rtcIntersect1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
+                     sizeof(RTCRayHit));
+      for (size_t k = 0; k < count; ++k) {
+        const RTCRayHit& ray = rays[k];
+        RayHit& out = hits[first + k];
+        if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        out.what = impl_->kind_of_geometry[ray.hit.geomID];
+        out.t = ray.ray.tfar;
+        Vec3d normal(ray.hit.Ng_x, ray.hit.Ng_y, ray.hit.Ng_z);
+        Vec3d dir(ray.ray.dir_x, ray.ray.dir_y, ray.ray.dir_z);
+        normal.normalize();
+        if (normal.dot(dir) > 0) normal = -normal;
+        out.normal = normal;
+      }
+    }
+  });
+}
+
+}  // namespace digitize::synth

@@ -1,0 +1,51 @@
+// Image and file output through OpenImageIO, and the atomic-write rule: everything the toolkit
+// writes goes to a temporary file beside the target and is renamed into place only when complete,
+// so a failure or a kill leaves the old file or none, never a partial one.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <string>
+
+#include "digitize/core.h"
+
+namespace digitize {
+
+// Calls write(temp_path), then renames temp_path to path. On failure removes the temporary file
+// and returns the error. The temporary file sits in path's directory (same file system).
+Status WriteAtomically(const std::filesystem::path& path,
+                       const std::function<Status(const std::filesystem::path& temp_path)>& write);
+
+Status WriteTextFile(const std::filesystem::path& path, const std::string& text);
+
+// String metadata stored in the image header (EXR attributes), e.g. {"digitize:units", "mm"}.
+using ImageMetadata = std::map<std::string, std::string>;
+
+// Float images (EXR, 32-bit float, ZIP compression), channels named as given
+// (e.g. {"Y"} or {"X","Y","Z"}).
+Status WriteFloatExr(const std::filesystem::path& path, const Grid<float>& image,
+                     const std::string& channel, const ImageMetadata& metadata = {});
+Status WriteFloatExr(const std::filesystem::path& path, const Grid<Vec3f>& image,
+                     const std::array<std::string, 3>& channels, const ImageMetadata& metadata = {});
+// 8-bit single-channel PNG (masks), values written as they are.
+Status WritePng8(const std::filesystem::path& path, const Grid<uint8_t>& image);
+// 8-bit RGB PNG (previews).
+Status WritePngRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image);
+
+// Reads any single-channel or 3-channel image OpenImageIO opens, converted to float.
+struct FloatImage {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> pixels;  // interleaved
+  std::string format;         // "openexr", "tiff", "png", ...
+  int bits_per_sample = 0;    // 8, 16, 32 (for integer formats: the original depth)
+  bool integer_samples = false;  // stored as integers: OIIO mapped 0..2^bits-1 onto [0, 1]
+  std::vector<std::string> channel_names;  // as stored: {"X","Y","Z"}, {"R","G","B"}, {"Y"}, ...
+  ImageMetadata metadata;
+};
+// Errors name the file: missing, unreadable, truncated, zero-sized or larger than max_pixels.
+Result<FloatImage> ReadImage(const std::filesystem::path& path, size_t max_pixels = size_t{1} << 28);
+
+}  // namespace digitize

@@ -1,0 +1,63 @@
+// "Preprocess scanned height maps": scan exposures -> canvas height field, normals, relief boxes,
+// and a report. Strings the stages together (SPEC steps 1-4) and times each step.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "digitize/canvas.h"
+#include "digitize/height_field.h"
+#include "digitize/normals.h"
+#include "digitize/relief.h"
+#include "digitize/resample.h"
+#include "digitize/scan.h"
+
+namespace digitize {
+
+struct PreprocessOptions {
+  MergeOptions merge;
+  SanitizeOptions sanitize;
+  CanvasOptions canvas;
+  ResampleOptions resample;
+  ReliefOptions relief;
+  bool noise_margin_from_scan = true;  // relief.noise_margin_mm = 2 x the estimated noise sigma
+  Status Validate() const;  // validates every part, message says which option
+};
+
+struct StepReport {
+  std::string name;     // "merge", "sanitize", "canvas", "resample", "relief", "normals"
+  double seconds = 0;   // wall time
+  std::string line;     // one human-readable line: what was done and found
+};
+
+struct PreprocessResult {
+  CanvasResult canvas;
+  HeightField field;
+  Grid<Vec3f> normals;
+  ReliefResult relief;
+  SanitizeStats sanitize;
+  MergeStats merge;
+  ResampleStats resample;
+  std::vector<StepReport> steps;
+  double total_seconds = 0;
+};
+
+// Errors: invalid options, exposures that cannot be merged, no canvas found (messages name the
+// scan's source). Never returns NaN/Inf in any grid. Takes the scans by value: move them in to
+// save a copy of a big scan (clean-up works in place).
+Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
+                                    const PreprocessOptions& options,
+                                    const ProgressCallback& progress = nullptr);
+
+// The report as JSON text (docs/formats.md, "preprocess report").
+std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
+                                 const std::vector<std::string>& inputs);
+
+// Writes height.exr, mask.png, normals.exr, boxes.json, transform.json, report.json into dir
+// (created if needed), each atomically. Returns the first error.
+Status WritePreprocessOutputs(const std::filesystem::path& dir, const PreprocessResult& result,
+                              const PreprocessOptions& options,
+                              const std::vector<std::string>& inputs);
+
+}  // namespace digitize

@@ -1,0 +1,35 @@
+// Resampling of the canvas part of a scan onto a regular grid in the canvas frame (SPEC step 2,
+// end). The scan's own pixel grid is triangulated (two triangles per quad of valid canvas
+// samples, none across a height step) and every triangle is rasterised into the canvas grid with
+// linear interpolation; where triangles overlap, the highest wins (a height field is seen from
+// above). Texels no triangle covers are holes: small ones are inpainted (TexelState::kFilled),
+// larger ones inpainted for continuity but marked kUnfilled.
+#pragma once
+
+#include "digitize/canvas.h"
+#include "digitize/height_field.h"
+#include "digitize/scan.h"
+
+namespace digitize {
+
+struct ResampleOptions {
+  double pitch_mm = 0;            // output texel spacing; 0 = the median scan sample spacing
+  double max_edge_factor = 4.0;   // triangles with an edge longer than this many pitches (in 3D)
+                                  // span a step or a gap and are not drawn
+  double max_hole_area_mm2 = 4.0; // holes up to this area are filled and reported; larger stay
+                                  // kUnfilled
+  int max_texels_per_side = 16384;  // refuse absurd grids (pitch too small for the canvas)
+  Status Validate() const;
+};
+
+struct ResampleStats {
+  size_t texels = 0, measured = 0, filled = 0, unfilled = 0, outside = 0;
+  size_t holes_filled = 0, holes_unfilled = 0;  // connected hole regions
+  size_t triangles_drawn = 0, triangles_skipped = 0;
+};
+
+Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options,
+                                         ResampleStats* stats = nullptr);
+
+}  // namespace digitize

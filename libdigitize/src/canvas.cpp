@@ -1,0 +1,917 @@
+// Canvas extraction (canvas.h; SPEC steps 1-2; paper 4.2).
+//
+// Pipeline inside ExtractCanvas:
+//   1. PCA plane of every usable sample (the frame and wall included; only a rough normal).
+//   2. Barrier mask: a pixel stops the growth when it is missing, when its Sobel height gradient
+//      (mm per pixel) exceeds stop_gradient_mm (depth discontinuities: the frame step on the side
+//      the frame occludes), or when its surface slope in the plane's frame exceeds stop_slope
+//      (frame walls seen obliquely: vertical in the canvas frame even where the per-pixel step is
+//      small, e.g. fine scans). Missing neighbours are replaced by the centre sample, so holes
+//      never create gradients.
+//   3. 4-connected flood fill from the seed over the non-barrier pixels; enclosed islands
+//      (impasto walls, holes, outliers) are added back.
+//   4. Robust plane: erode by erode_px, PCA, then trimmed refits (relief above, outliers below).
+//   5. Boundary: the region is peeled by kPeelPx pixels (the growth may have climbed onto the foot
+//      of a wall) and regrown by a strict test: height step < refine_step_mm, second difference
+//      along the growth direction small, and not the foot of a vertical run (a frame wall). This
+//      recovers the ring that Sobel's 3x3 support loses without taking a single wall pixel.
+//   6. Canvas frame: Z = robust normal, X = the in-plane PCA axis closest to scan +X, origin at
+//      the lower-left corner of the mask points' bounding rectangle, height 0 on the plane.
+#include "digitize/canvas.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <chrono>
+#include <ctime>
+static double NowS() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+static double CpuS() { timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + t.tv_nsec * 1e-9; }
+#define TMARK(name) if (getenv("CTIME")) { double t_ = NowS(), c_ = CpuS(); fprintf(stderr, "  %-14s wall %6.1f ms cpu %6.1f ms\n", name, (t_ - tmark_) * 1e3, (c_ - cmark_) * 1e3); tmark_ = t_; cmark_ = c_; }
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+namespace digitize {
+namespace {
+
+// Coordinates beyond this are sensor garbage even when the scan was not sanitised (1e30).
+constexpr float kMaxAbsCoordinateMm = 1e6f;
+// Fewer usable samples than this cannot define a canvas.
+constexpr size_t kMinValidSamples = 100;
+// The growth can include the foot of an oblique wall (one pixel); peel this much before refining.
+constexpr int kPeelPx = 2;
+// Wall test: a barrier neighbour (step or steep slope, see GrowableMask) higher or lower by more
+// than kWallRise sample spacings is part of a frame wall; the candidate may then be the wall's foot and must continue the canvas within
+// the noise (kTightSigmas second-difference sigmas, plus kTightFloorMm of relief curvature).
+// Otherwise the second difference may reach max(kRefineCurvatureShare * refine_step_mm,
+// kRefineNoiseSigmas * noise sigma). The noise of a second difference is sqrt(6) sigma.
+constexpr double kWallRise = 0.5;
+constexpr double kTightSigmas = 2.0;
+// Foot of a wall: within kLineSigmas second-difference sigmas (plus kLineFloorShare of a sample
+// spacing) of the line through the next two wall samples.
+constexpr double kLineSigmas = 4.0;
+constexpr double kLineFloorShare = 0.02;
+// ... and only where that run is steep (slope above kLineSlope) and climbs by more than
+// kLineRiseSigmas height-difference sigmas: a barrier run along a frame step on flat canvas is
+// collinear too, but flat.
+constexpr double kLineRiseSigmas = 3.0;
+constexpr double kLineSlope = 1.0;
+// Over a missing sample the extrapolation 3 p(q+2d) - 2 p(q+3d) has sqrt(14 / 6) times the noise.
+constexpr double kFarLineFactor = 1.53;
+constexpr double kTightFloorMm = 0.06;
+constexpr double kRefineCurvatureShare = 0.5;
+constexpr double kRefineNoiseSigmas = 10.0;
+// Robust refit: iterations, and the lower trim (outliers below the canvas) in multiples of the
+// upper one (relief above).
+constexpr int kTrimIterations = 3;
+constexpr double kLowerTrimFactor = 2.0;
+// Plane fits use a regular subsample of about this many samples (the rough one of the whole
+// scan, the robust ones of the canvas): their error is far below the noise either way.
+constexpr size_t kRoughSamples = 1000000;
+constexpr size_t kFitSamples = 1000000;
+// Samples for medians (MAD, spacings, noise): a regular subsample of about this many pixels.
+constexpr size_t kStatSamples = 250000;
+// In-plane eigenvalues closer than this (relative) leave the axes undefined: use scan +X.
+constexpr double kIsotropicEigen = 0.05;
+// Points farther than this from the plane are not canvas (frames rise 15+ mm): they do not
+// stretch the bounding rectangle (outliers that survived in the mask).
+constexpr double kBoundHeightMm = 15.0;
+// MAD -> sigma for a Gaussian.
+constexpr double kMadToSigma = 1.4826;
+
+inline bool Usable(const Vec3f& p) {
+  return std::fabs(p.x()) <= kMaxAbsCoordinateMm && std::fabs(p.y()) <= kMaxAbsCoordinateMm &&
+         std::fabs(p.z()) <= kMaxAbsCoordinateMm;  // false for NaN and Inf too
+}
+
+std::string SourceName(const Scan& scan) { return scan.source.empty() ? "scan" : scan.source; }
+
+// First and second moments about a fixed shift (keeps the covariance well conditioned).
+struct Moments {
+  double n = 0;
+  double sx = 0, sy = 0, sz = 0;
+  double sxx = 0, sxy = 0, sxz = 0, syy = 0, syz = 0, szz = 0;
+  void Add(double x, double y, double z) {
+    n += 1;
+    sx += x, sy += y, sz += z;
+    sxx += x * x, sxy += x * y, sxz += x * z;
+    syy += y * y, syz += y * z, szz += z * z;
+  }
+  void Merge(const Moments& o) {
+    n += o.n;
+    sx += o.sx, sy += o.sy, sz += o.sz;
+    sxx += o.sxx, sxy += o.sxy, sxz += o.sxz;
+    syy += o.syy, syz += o.syz, szz += o.szz;
+  }
+  Vec3d Sum() const { return {sx, sy, sz}; }
+  Mat3d SecondMoments() const {
+    Mat3d m;
+    m << sxx, sxy, sxz, sxy, syy, syz, sxz, syz, szz;
+    return m;
+  }
+};
+
+PlaneFit PlaneFromMoments(const Moments& m, const Vec3d& shift) {
+  PlaneFit fit;
+  fit.count = static_cast<size_t>(m.n);
+  if (m.n < 1) return fit;
+  const Vec3d mean = m.Sum() / m.n;
+  fit.centroid = shift + mean;
+  Mat3d cov = m.SecondMoments() / m.n - mean * mean.transpose();
+  cov = 0.5 * (cov + cov.transpose());
+  Eigen::SelfAdjointEigenSolver<Mat3d> solver(cov);
+  if (solver.info() != Eigen::Success) return fit;
+  const Vec3d ev = solver.eigenvalues();  // ascending
+  const Mat3d vec = solver.eigenvectors();
+  Vec3d major = vec.col(2), minor = vec.col(1), normal = vec.col(0);
+  if (normal.z() > 0) normal = -normal;  // towards a scanner looking along +Z
+  if (major.cross(minor).dot(normal) < 0) minor = -minor;
+  fit.axes.col(0) = major;
+  fit.axes.col(1) = minor;
+  fit.axes.col(2) = normal;
+  fit.eigenvalues = Vec3d(std::max(ev(2), 0.0), std::max(ev(1), 0.0), std::max(ev(0), 0.0));
+  return fit;
+}
+
+// PCA of the usable scan samples for which pred(x, y, p) holds; rows in parallel.
+// PCA of the usable scan samples on every `stride`-th row and column for which pred(x, y, p)
+// holds; rows in parallel, moments in double about `shift`.
+template <class Pred>
+PlaneFit FitGrid(const Grid<Vec3f>& xyz, const Vec3d& shift, int stride, const Pred& pred) {
+  const int rows_sampled = (xyz.height + stride - 1) / stride;
+  const Moments m = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, rows_sampled), Moments{},
+      [&](const tbb::blocked_range<int>& rows, Moments acc) {
+        for (int r = rows.begin(); r < rows.end(); ++r) {
+          const int y = r * stride;
+          const Vec3f* row = xyz.Row(y);
+          Moments line;
+          for (int x = 0; x < xyz.width; x += stride) {
+            const Vec3f& p = row[x];
+            if (!Usable(p) || !pred(x, y, p)) continue;
+            line.Add(p.x() - shift.x(), p.y() - shift.y(), p.z() - shift.z());
+          }
+          acc.Merge(line);
+        }
+        return acc;
+      },
+      [](Moments a, const Moments& b) {
+        a.Merge(b);
+        return a;
+      });
+  return PlaneFromMoments(m, shift);
+}
+
+// PCA of the points for which pred(p) holds; in parallel, moments in double about `shift`.
+template <class Pred>
+PlaneFit FitPoints(const std::vector<Vec3f>& points, const Vec3d& shift, const Pred& pred) {
+  const Eigen::Vector3f shift_f = shift.cast<float>();
+  const Vec3d shift_used = shift_f.cast<double>();
+  const Moments m = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, points.size(), 1 << 14), Moments{},
+      [&](const tbb::blocked_range<size_t>& r, Moments acc) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const Vec3f& p = points[i];
+          if (!pred(p)) continue;
+          // Float subtraction of nearby values is exact to the data's own precision.
+          const Eigen::Vector3f d = p - shift_f;
+          acc.Add(d.x(), d.y(), d.z());
+        }
+        return acc;
+      },
+      [](Moments a, const Moments& b) {
+        a.Merge(b);
+        return a;
+      });
+  return PlaneFromMoments(m, shift_used);
+}
+
+// Stride giving about `target` samples out of `count`.
+int SampleStride(size_t count, size_t target) {
+  return std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count) / target)));
+}
+
+double Median(std::vector<double>& v) {
+  if (v.empty()) return 0;
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
+  return v[mid];
+}
+
+// Median absolute deviation about `center`.
+double Mad(const std::vector<double>& v, double center) {
+  std::vector<double> d(v.size());
+  for (size_t i = 0; i < v.size(); ++i) d[i] = std::fabs(v[i] - center);
+  return Median(d);
+}
+
+// Stride so that a regular subsample of `count` pixels has about kStatSamples elements.
+int StatStride(size_t count) { return SampleStride(count, kStatSamples); }
+
+// Heights and in-plane coordinates of a plane frame (float: used per pixel in hot loops).
+struct LocalFrame {
+  Eigen::Vector3f c, n, a, b;
+  explicit LocalFrame(const PlaneFit& f)
+      : c(f.centroid.cast<float>()),
+        n(f.axes.col(2).cast<float>()),
+        a(f.axes.col(0).cast<float>()),
+        b(f.axes.col(1).cast<float>()) {}
+  float H(const Vec3f& p) const { return n.dot(p - c); }
+  Eigen::Vector2f UV(const Vec3f& p) const {
+    const Eigen::Vector3f d = p - c;
+    return {a.dot(d), b.dot(d)};
+  }
+};
+
+// Heights h, in-plane coordinates u, v and validity m (1 / 0; h = u = v = 0 where missing) of
+// one scan row (interleaved x, y, z). Free function with restrict pointers: vectorised.
+void ProjectRow(const float* __restrict xyz, int width, const LocalFrame& frame,
+                float* __restrict hh, float* __restrict uu, float* __restrict vv,
+                float* __restrict mm) {
+  const float cx = frame.c.x(), cy = frame.c.y(), cz = frame.c.z();
+  const float nx = frame.n.x(), ny = frame.n.y(), nz = frame.n.z();
+  const float ax = frame.a.x(), ay = frame.a.y(), az = frame.a.z();
+  const float bx = frame.b.x(), by = frame.b.y(), bz = frame.b.z();
+  const uint32_t lim = std::bit_cast<uint32_t>(kMaxAbsCoordinateMm);
+  for (int x = 0; x < width; ++x) {
+    const float px = xyz[3 * x], py = xyz[3 * x + 1], pz = xyz[3 * x + 2];
+    // |p| <= limit on the bit patterns (NaN and Inf fail); integer masks instead of branches so
+    // the loop vectorises under strict floating-point semantics.
+    const uint32_t ax_bits = std::bit_cast<uint32_t>(px) & 0x7fffffffu;
+    const uint32_t ay_bits = std::bit_cast<uint32_t>(py) & 0x7fffffffu;
+    const uint32_t az_bits = std::bit_cast<uint32_t>(pz) & 0x7fffffffu;
+    const uint32_t mask =
+        0u - static_cast<uint32_t>((ax_bits <= lim) & (ay_bits <= lim) & (az_bits <= lim));
+    const float dx = std::bit_cast<float>(std::bit_cast<uint32_t>(px - cx) & mask);
+    const float dy = std::bit_cast<float>(std::bit_cast<uint32_t>(py - cy) & mask);
+    const float dz = std::bit_cast<float>(std::bit_cast<uint32_t>(pz - cz) & mask);
+    hh[x] = nx * dx + ny * dy + nz * dz;
+    uu[x] = ax * dx + ay * dy + az * dz;
+    vv[x] = bx * dx + by * dy + bz * dz;
+    mm[x] = std::bit_cast<float>(std::bit_cast<uint32_t>(1.f) & mask);
+  }
+}
+
+// One row of the barrier test from the vertical Sobel passes (smooth s, difference d) of the
+// channels h, u, v, validity (each `stride` apart) and the centre row's values. A free function
+// with restrict pointers so the compiler vectorises it.
+void BarrierRow(const float* const centre[4], const float* __restrict s, const float* __restrict d,
+                size_t stride, int width, float grad_limit2, float slope2,
+                uint8_t* __restrict grow_row, uint8_t* __restrict valid_row) {
+  const float* __restrict ch = centre[0];
+  const float* __restrict cu = centre[1];
+  const float* __restrict cv = centre[2];
+  const float* __restrict cm = centre[3];
+  const float* __restrict sh = s;
+  const float* __restrict su = s + stride;
+  const float* __restrict sv = s + 2 * stride;
+  const float* __restrict sm = s + 3 * stride;
+  const float* __restrict dh = d;
+  const float* __restrict du = d + stride;
+  const float* __restrict dv = d + 2 * stride;
+  const float* __restrict dm = d + 3 * stride;
+  for (int x = 0; x < width; ++x) {
+    const float mx = sm[x + 1] - sm[x - 1], my = dm[x - 1] + 2.f * dm[x] + dm[x + 1];
+    const float hc = ch[x], uc = cu[x], vc = cv[x];
+    const float hx = (sh[x + 1] - sh[x - 1]) - hc * mx;
+    const float hy = (dh[x - 1] + 2.f * dh[x] + dh[x + 1]) - hc * my;
+    const float ux = (su[x + 1] - su[x - 1]) - uc * mx;
+    const float uy = (du[x - 1] + 2.f * du[x] + du[x + 1]) - uc * my;
+    const float vx = (sv[x + 1] - sv[x - 1]) - vc * mx;
+    const float vy = (dv[x - 1] + 2.f * dv[x] + dv[x + 1]) - vc * my;
+    // Height gradient per pixel: |Sobel| / 8.
+    const bool step = hx * hx + hy * hy > grad_limit2;
+    // Slope in the plane frame: grad_uv h = J^-T grad_xy h, J = d(u, v) / d(x, y); compared
+    // without dividing by det J so vertical and folded geometry (det ~ 0) is a barrier.
+    const float det = ux * vy - uy * vx;
+    const float gu = vy * hx - vx * hy, gv = ux * hy - uy * hx;
+    const bool steep = gu * gu + gv * gv > slope2 * det * det;
+    const bool ok = cm[x] > 0.5f;
+    grow_row[x] = static_cast<uint8_t>(ok & !step & !steep);
+    valid_row[x] = static_cast<uint8_t>(ok);
+  }
+}
+
+// Barrier test (step 2) for every pixel: growable(x, y) = 1 where growth may pass, valid(x, y) =
+// 1 where the sample is usable.
+//
+// Sobel with missing neighbours replaced by the centre value c is linear: for a channel with
+// values n (0 where missing) and validity m, sum_k w_k (m_k n_k + (1 - m_k) c) = S(n) - c S(m)
+// because the Sobel weights sum to zero. So each channel (h, u, v) and the validity mask get a
+// plain separable Sobel on three sliding rows, and the combination per pixel is branch-free.
+void GrowableMask(const Grid<Vec3f>& xyz, const LocalFrame& frame, double stop_gradient_mm,
+                  double stop_slope, cv::Mat& growable, cv::Mat& valid) {
+  const int w = xyz.width, h = xyz.height;
+  growable.create(h, w, CV_8U);
+  valid.create(h, w, CV_8U);
+  const float grad_limit2 = static_cast<float>(64.0 * stop_gradient_mm * stop_gradient_mm);
+  const float slope2 = static_cast<float>(stop_slope * stop_slope);
+  constexpr int kChannels = 4;  // h, u, v, validity
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
+    const size_t stride = static_cast<size_t>(w) + 2;  // one zero (missing) pad on each side
+    std::vector<float> buf(3 * kChannels * stride, 0.f);
+    std::vector<float> vs(kChannels * stride), vd(kChannels * stride);  // vertical smooth / diff
+    auto row_ptr = [&](int slot, int c) { return buf.data() + (slot * kChannels + c) * stride; };
+    auto fill_row = [&](int y, int slot) {
+      float* hh = row_ptr(slot, 0) + 1;
+      float* uu = row_ptr(slot, 1) + 1;
+      float* vv = row_ptr(slot, 2) + 1;
+      float* mm = row_ptr(slot, 3) + 1;
+      if (y < 0 || y >= h) {
+        std::fill(hh, hh + w, 0.f);
+        std::fill(uu, uu + w, 0.f);
+        std::fill(vv, vv + w, 0.f);
+        std::fill(mm, mm + w, 0.f);
+        return;
+      }
+      ProjectRow(xyz.Row(y)->data(), w, frame, hh, uu, vv, mm);
+    };
+    int slot_of[3] = {0, 1, 2};  // slots of rows y-1, y, y+1
+    fill_row(rows.begin() - 1, 0);
+    fill_row(rows.begin(), 1);
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      fill_row(y + 1, slot_of[2]);
+      for (int c = 0; c < kChannels; ++c) {
+        const float* __restrict r0 = row_ptr(slot_of[0], c);
+        const float* __restrict r1 = row_ptr(slot_of[1], c);
+        const float* __restrict r2 = row_ptr(slot_of[2], c);
+        float* __restrict s_out = vs.data() + c * stride;
+        float* __restrict d_out = vd.data() + c * stride;
+        for (size_t x = 0; x < stride; ++x) {
+          s_out[x] = r0[x] + 2.f * r1[x] + r2[x];
+          d_out[x] = r2[x] - r0[x];
+        }
+      }
+      const float* centre[4] = {row_ptr(slot_of[1], 0) + 1, row_ptr(slot_of[1], 1) + 1,
+                                row_ptr(slot_of[1], 2) + 1, row_ptr(slot_of[1], 3) + 1};
+      BarrierRow(centre, vs.data() + 1, vd.data() + 1, stride, w, grad_limit2, slope2,
+                 growable.ptr<uint8_t>(y), valid.ptr<uint8_t>(y));
+      const int old = slot_of[0];
+      slot_of[0] = slot_of[1];
+      slot_of[1] = slot_of[2];
+      slot_of[2] = old;
+    }
+  });
+}
+
+// Pixels of `mask` (0/255) reachable from the image border through non-mask pixels are the
+// outside; the others (enclosed islands) are returned as 255.
+cv::Mat EnclosedIslands(const cv::Mat& mask) {
+  cv::Mat padded;
+  cv::Mat inverse;
+  cv::bitwise_not(mask, inverse);
+  cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
+  cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
+  return padded(cv::Rect(1, 1, mask.cols, mask.rows)).clone();
+}
+
+// Packed indices y * width + x of the nonzero pixels of a continuous 8-bit image, in raster
+// order; rows scanned in parallel, eight bytes at a time.
+std::vector<int> NonZeroIndices(const cv::Mat& image) {
+  const int w = image.cols, h = image.rows;
+  std::vector<std::vector<int>> per_row(static_cast<size_t>(h));
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      const uint8_t* row = image.ptr<uint8_t>(y);
+      int x = 0;
+      for (; x + 8 <= w; x += 8) {
+        uint64_t word;
+        std::memcpy(&word, row + x, 8);
+        if (!word) continue;
+        for (int k = 0; k < 8; ++k)
+          if (row[x + k]) per_row[static_cast<size_t>(y)].push_back(y * w + x + k);
+      }
+      for (; x < w; ++x)
+        if (row[x]) per_row[static_cast<size_t>(y)].push_back(y * w + x);
+    }
+  });
+  std::vector<int> out;
+  for (const auto& v : per_row) out.insert(out.end(), v.begin(), v.end());
+  return out;
+}
+
+// Nearest pixel to (cx, cy) with growable != 0, searched in square rings.
+bool FindSeed(const cv::Mat& growable, int cx, int cy, int* sx, int* sy) {
+  const int w = growable.cols, h = growable.rows;
+  const int max_r = std::max(w, h);
+  for (int r = 0; r <= max_r; ++r) {
+    long best = std::numeric_limits<long>::max();
+    for (int y = cy - r; y <= cy + r; ++y) {
+      if (y < 0 || y >= h) continue;
+      const bool edge_row = (y == cy - r || y == cy + r);
+      const uint8_t* row = growable.ptr<uint8_t>(y);
+      for (int x = cx - r; x <= cx + r; x += edge_row ? 1 : 2 * r) {
+        if (x >= 0 && x < w && row[x]) {
+          const long d = static_cast<long>(x - cx) * (x - cx) + static_cast<long>(y - cy) * (y - cy);
+          if (d < best) {
+            best = d;
+            *sx = x;
+            *sy = y;
+          }
+        }
+        if (r == 0) break;
+      }
+    }
+    if (best != std::numeric_limits<long>::max()) return true;
+  }
+  return false;
+}
+
+// Median in-plane spacing between 4-neighbours (dx, dy) that are both usable and in `mask`.
+double MedianSpacing(const Grid<Vec3f>& xyz, const cv::Mat& mask, const LocalFrame& frame, int dx,
+                     int dy, size_t mask_count) {
+  const int stride = StatStride(mask_count);
+  std::vector<double> d;
+  for (int y = 0; y + dy < xyz.height; y += stride) {
+    const uint8_t* m0 = mask.ptr<uint8_t>(y);
+    const uint8_t* m1 = mask.ptr<uint8_t>(y + dy);
+    for (int x = 0; x + dx < xyz.width; x += stride) {
+      if (!m0[x] || !m1[x + dx]) continue;
+      const Vec3f& p = xyz(x, y);
+      const Vec3f& q = xyz(x + dx, y + dy);
+      if (!Usable(p) || !Usable(q)) continue;
+      d.push_back((frame.UV(q) - frame.UV(p)).norm());
+    }
+  }
+  return Median(d);
+}
+
+}  // namespace
+
+Status CanvasOptions::Validate() const {
+  auto fail = [](const std::string& what) { return Status(Error{"canvas options: " + what}); };
+  if (!(stop_gradient_mm > 0) || !std::isfinite(stop_gradient_mm))
+    return fail("stop_gradient_mm must be > 0, got " + std::to_string(stop_gradient_mm));
+  if (!(stop_slope > 0) || !std::isfinite(stop_slope))
+    return fail("stop_slope must be > 0, got " + std::to_string(stop_slope));
+  if (!(refine_step_mm > 0) || !std::isfinite(refine_step_mm))
+    return fail("refine_step_mm must be > 0, got " + std::to_string(refine_step_mm));
+  if (refine_px < 0 || refine_px > 1000)
+    return fail("refine_px must be in [0, 1000], got " + std::to_string(refine_px));
+  if (erode_px < 0 || erode_px > 1000)
+    return fail("erode_px must be in [0, 1000], got " + std::to_string(erode_px));
+  if (!(trim_sigmas > 0) || !std::isfinite(trim_sigmas))
+    return fail("trim_sigmas must be > 0, got " + std::to_string(trim_sigmas));
+  if ((seed_x < 0) != (seed_y < 0) || seed_x < -1 || seed_y < -1)
+    return fail("seed must be both -1 (scan centre) or both >= 0, got (" + std::to_string(seed_x) +
+                ", " + std::to_string(seed_y) + ")");
+  if (!(min_canvas_fraction >= 0 && min_canvas_fraction <= 1))
+    return fail("min_canvas_fraction must be in [0, 1], got " +
+                std::to_string(min_canvas_fraction));
+  return Status::Ok();
+}
+
+PlaneFit FitPlanePca(const std::vector<Vec3d>& points) {
+  // Shift by the first finite point so the second moments stay small.
+  Vec3d shift = Vec3d::Zero();
+  for (const Vec3d& p : points)
+    if (p.allFinite()) {
+      shift = p;
+      break;
+    }
+  const Moments m = tbb::parallel_reduce(
+      tbb::blocked_range<size_t>(0, points.size(), 4096), Moments{},
+      [&](const tbb::blocked_range<size_t>& r, Moments acc) {
+        for (size_t i = r.begin(); i < r.end(); ++i)
+          if (points[i].allFinite()) {
+            const Vec3d d = points[i] - shift;
+            acc.Add(d.x(), d.y(), d.z());
+          }
+        return acc;
+      },
+      [](Moments a, const Moments& b) {
+        a.Merge(b);
+        return a;
+      });
+  return PlaneFromMoments(m, shift);
+}
+
+Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& options) {
+  const std::string src = SourceName(scan);
+  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
+  const Grid<Vec3f>& xyz = scan.xyz_mm;
+  const int w = xyz.width, h = xyz.height;
+  if (xyz.empty() || xyz.data.size() != static_cast<size_t>(w) * static_cast<size_t>(h))
+    return Error{src + ": empty scan (" + std::to_string(w) + "x" + std::to_string(h) + ")"};
+
+  double tmark_ = NowS(), cmark_ = CpuS();
+  // ---- 1. Rough plane of every usable sample.
+  // Moments about the first usable sample at or after the centre keep the covariance well
+  // conditioned; the rough plane needs only a regular subsample.
+  Vec3d shift = Vec3d::Zero();
+  {
+    const size_t total = xyz.size(), start = total / 2;
+    for (size_t k = 0; k < total; ++k) {
+      const Vec3f& p = xyz.data[(start + k) % total];
+      if (Usable(p)) {
+        shift = p.cast<double>();
+        break;
+      }
+    }
+  }
+  const auto all = [](int, int, const Vec3f&) { return true; };
+  const int rough_stride = SampleStride(xyz.size(), kRoughSamples);
+  PlaneFit rough = FitGrid(xyz, shift, rough_stride, all);
+  if (rough_stride > 1 && rough.count < kRoughSamples / 100) rough = FitGrid(xyz, shift, 1, all);
+  if (rough.count < kMinValidSamples)
+    return Error{src + ": only " + std::to_string(rough.count) + " valid samples in a " +
+                 std::to_string(w) + "x" + std::to_string(h) + " scan (at least " +
+                 std::to_string(kMinValidSamples) + " needed to find a canvas)"};
+  if (!(rough.eigenvalues(1) > 1e-9 * rough.eigenvalues(0)) || !(rough.eigenvalues(0) > 0))
+    return Error{src + ": the valid samples are (nearly) collinear; a " + std::to_string(w) +
+                 "x" + std::to_string(h) + " scan does not span a canvas plane"};
+
+  TMARK("pca0")
+  // ---- 2. Barrier mask.
+  cv::Mat grow, valid;
+  GrowableMask(xyz, LocalFrame(rough), options.stop_gradient_mm, options.stop_slope, grow, valid);
+  const size_t valid_count = static_cast<size_t>(cv::countNonZero(valid));
+
+  TMARK("barrier")
+  // ---- 3. Region growing from the seed, enclosed islands added back.
+  const bool user_seed = options.seed_x >= 0;
+  int cx = user_seed ? options.seed_x : w / 2, cy = user_seed ? options.seed_y : h / 2;
+  if (user_seed && (cx >= w || cy >= h))
+    return Error{src + ": seed (" + std::to_string(cx) + ", " + std::to_string(cy) +
+                 ") lies outside the " + std::to_string(w) + "x" + std::to_string(h) + " scan"};
+  int sx = -1, sy = -1;
+  if (!FindSeed(grow, cx, cy, &sx, &sy))
+    return Error{src + ": no valid sample with a low gradient near the seed (" +
+                 std::to_string(cx) + ", " + std::to_string(cy) +
+                 "); nothing to grow the canvas from"};
+  const int grown = cv::floodFill(grow, cv::Point(sx, sy), cv::Scalar(2), nullptr, cv::Scalar(0),
+                                  cv::Scalar(0), 4);
+  cv::Mat region;
+  cv::compare(grow, 2, region, cv::CMP_EQ);  // 255 / 0
+  const cv::Mat islands = EnclosedIslands(region);
+  const size_t islands_px = static_cast<size_t>(cv::countNonZero(islands));
+  const std::string seed_text = "(" + std::to_string(sx) + ", " + std::to_string(sy) + ")";
+  const std::string seed_hint =
+      user_seed ? "" : "; the canvas may be off-centre: give a seed on the canvas (--seed X,Y)";
+  if (islands_px > static_cast<size_t>(grown))
+    return Error{src + ": the region grown from seed " + seed_text + " (" + std::to_string(grown) +
+                 " px) encloses a larger area (" + std::to_string(islands_px) +
+                 " px): the seed is on the frame or the wall, not on the canvas" + seed_hint};
+  TMARK("flood+islands")
+  cv::Mat filled;
+  cv::bitwise_or(region, islands, filled);
+  region.release();
+  const size_t filled_px = static_cast<size_t>(grown) + islands_px;
+  if (static_cast<double>(filled_px) <
+      options.min_canvas_fraction * static_cast<double>(valid_count))
+    return Error{src + ": the region grown from seed " + seed_text + " covers " +
+                 std::to_string(filled_px) + " px, less than " +
+                 std::to_string(options.min_canvas_fraction * 100) + " % of the " +
+                 std::to_string(valid_count) + " valid samples (seed on the frame or a speck?)" +
+                 seed_hint};
+
+  TMARK("checks")
+  // ---- 4. Robust plane on the eroded region.
+  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
+  cv::Mat fit_mask;
+  if (options.erode_px > 0)
+    cv::erode(filled, fit_mask, kernel, cv::Point(-1, -1), options.erode_px);
+  else
+    fit_mask = filled.clone();
+  cv::bitwise_and(fit_mask, valid, fit_mask);  // valid is 0/1: nonzero where valid
+  if (static_cast<size_t>(cv::countNonZero(fit_mask)) < kMinValidSamples)
+    cv::bitwise_and(filled, valid, fit_mask);  // tiny canvas: fit on all of it
+  TMARK("erode+and")
+  const size_t fit_mask_count = static_cast<size_t>(cv::countNonZero(fit_mask));
+  // The fit samples, gathered once (a regular subsample of the eroded canvas).
+  std::vector<Vec3f> fit_points;
+  {
+    const int stride = SampleStride(fit_mask_count, kFitSamples);
+    const int rows_sampled = (h + stride - 1) / stride;
+    std::vector<std::vector<Vec3f>> per_row(static_cast<size_t>(rows_sampled));
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows_sampled), [&](const tbb::blocked_range<int>& r) {
+      for (int i = r.begin(); i < r.end(); ++i) {
+        const int y = i * stride;
+        const uint8_t* m = fit_mask.ptr<uint8_t>(y);
+        const Vec3f* row = xyz.Row(y);
+        for (int x = 0; x < w; x += stride)
+          if (m[x] && Usable(row[x])) per_row[static_cast<size_t>(i)].push_back(row[x]);
+      }
+    });
+    size_t total = 0;
+    for (const auto& v : per_row) total += v.size();
+    fit_points.reserve(total);
+    for (const auto& v : per_row) fit_points.insert(fit_points.end(), v.begin(), v.end());
+  }
+  PlaneFit plane = FitPoints(fit_points, rough.centroid, [](const Vec3f&) { return true; });
+  TMARK("fit1")
+  if (plane.count < 3)
+    return Error{src + ": too few canvas samples (" + std::to_string(plane.count) +
+                 ") to fit the canvas plane"};
+  const int fit_stride = StatStride(fit_mask_count);
+  const size_t residual_step = std::max<size_t>(1, fit_points.size() / kStatSamples);
+  for (int it = 0; it < kTrimIterations; ++it) {
+    const Eigen::Vector3f c = plane.centroid.cast<float>(), n = plane.axes.col(2).cast<float>();
+    std::vector<double> r;
+    r.reserve(fit_points.size() / residual_step + 1);
+    for (size_t i = 0; i < fit_points.size(); i += residual_step)
+      r.push_back(n.dot(fit_points[i] - c));
+    if (r.size() < 3) break;
+    std::vector<double> tmp = r;
+    const double med = Median(tmp);
+    const double sigma = std::max(kMadToSigma * Mad(r, med), 1e-6);
+    const float hi = static_cast<float>(med + options.trim_sigmas * sigma);
+    const float lo = static_cast<float>(med - kLowerTrimFactor * options.trim_sigmas * sigma);
+    PlaneFit next = FitPoints(fit_points, plane.centroid, [&](const Vec3f& p) {
+      const float d = n.dot(p - c);
+      return d >= lo && d <= hi;
+    });
+    TMARK("refit")
+    if (next.count < 3 || !(next.eigenvalues(1) > 0)) break;
+    plane = next;
+  }
+  TMARK("robustfit")
+  const LocalFrame frame(plane);
+
+  // Noise: Immerkaer's mask [1 -2 1; -2 4 -2; 1 -2 1] (a product of second differences, blind to
+  // planes and to curvature along x or y) has a response of 6 sigma on white noise.
+  double noise_sigma = 0;
+  {
+    std::vector<double> resp;
+    for (int y = 1; y + 1 < h; y += fit_stride) {
+      const uint8_t* m = fit_mask.ptr<uint8_t>(y);
+      for (int x = 1; x + 1 < w; x += fit_stride) {
+        if (!m[x]) continue;
+        static constexpr float k[3][3] = {{1, -2, 1}, {-2, 4, -2}, {1, -2, 1}};
+        double acc = 0;
+        bool ok = true;
+        for (int j = -1; j <= 1 && ok; ++j)
+          for (int i = -1; i <= 1; ++i) {
+            const Vec3f& p = xyz(x + i, y + j);
+            if (!Usable(p)) {
+              ok = false;
+              break;
+            }
+            acc += k[j + 1][i + 1] * frame.H(p);
+          }
+        if (ok) resp.push_back(acc);
+      }
+    }
+    if (!resp.empty()) {
+      std::vector<double> tmp = resp;
+      const double med = Median(tmp);
+      noise_sigma = kMadToSigma * Mad(resp, med) / 6.0;
+    }
+  }
+
+  TMARK("noise")
+  // ---- 5. Boundary: peel, then regrow with the strict test.
+  cv::Mat core;
+  cv::erode(filled, core, kernel, cv::Point(-1, -1), kPeelPx);
+  if (cv::countNonZero(core) == 0) core = filled.clone();
+  if (getenv("CDBG2")) for (int yy = 98; yy < 112; ++yy) { for (int xx = 112; xx < 130; ++xx) fprintf(stderr, "%d%d ", filled.at<uint8_t>(yy, xx) ? 1 : 0, grow.at<uint8_t>(yy, xx)); fprintf(stderr, "\n"); }
+  const double spacing_x = MedianSpacing(xyz, core, frame, 1, 0, fit_mask_count);
+  const double spacing_y = MedianSpacing(xyz, core, frame, 0, 1, fit_mask_count);
+  const double tol_loose = std::max(kRefineCurvatureShare * options.refine_step_mm,
+                                    kRefineNoiseSigmas * noise_sigma);
+  const double tol_tight = kTightSigmas * std::sqrt(6.0) * noise_sigma + kTightFloorMm;
+  const float tol_line = static_cast<float>(kLineSigmas * std::sqrt(6.0) * noise_sigma +
+                                            kLineFloorShare * std::min(spacing_x, spacing_y));
+  const float rise_line = static_cast<float>(kLineRiseSigmas * std::sqrt(2.0) * noise_sigma +
+                                             kLineFloorShare * std::min(spacing_x, spacing_y));
+  const float step_mm = static_cast<float>(options.refine_step_mm);
+  // The mask being refined: 255 = in. Continuous, so it is indexed directly.
+  cv::Mat mask = core.isContinuous() ? core : core.clone();
+  core.release();
+  uint8_t* in = mask.data;
+  auto idx = [w](int x, int y) { return static_cast<size_t>(y) * w + x; };
+  auto usable_at = [&](int x, int y) { return valid.ptr<uint8_t>(y)[x] != 0; };
+  static constexpr int kDx[4] = {1, -1, 0, 0};
+  static constexpr int kDy[4] = {0, 0, 1, -1};
+  auto inside = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h; };
+  auto accept = [&](int qx, int qy) {
+    const Vec3f& pq = xyz(qx, qy);
+    const float hq = frame.H(pq);
+    // A barrier next to q (steep or a step: a frame wall), clearly higher or lower: q may be the
+    // wall's foot, so q must then continue the canvas within the noise.
+    bool wall_next = false;
+    for (int d = 0; d < 4; ++d) {
+      const int x1 = qx + kDx[d], y1 = qy + kDy[d];
+      if (!inside(x1, y1)) continue;
+      const double spacing = kDx[d] != 0 ? spacing_x : spacing_y;
+      if (!usable_at(x1, y1)) {
+        // The next sample is missing: the same test one step further (q = 3 p(q+2d) - 2 p(q+3d)).
+        const int x2 = x1 + kDx[d], y2 = y1 + kDy[d], x3 = x2 + kDx[d], y3 = y2 + kDy[d];
+        if (!inside(x3, y3) || !usable_at(x2, y2) || !usable_at(x3, y3) ||
+            grow.ptr<uint8_t>(y2)[x2] != 0 || grow.ptr<uint8_t>(y3)[x3] != 0)
+          continue;
+        const Vec3f& p2 = xyz(x2, y2);
+        const Vec3f& p3 = xyz(x3, y3);
+        const float h2 = frame.H(p2);
+        const float rise = std::fabs(frame.H(p3) - h2);
+        if (!(rise > rise_line && rise > kLineSlope * (frame.UV(p3) - frame.UV(p2)).norm()))
+          continue;
+        wall_next = wall_next || std::fabs(h2 - hq) > 2 * kWallRise * spacing;
+        if ((pq - 3.0f * p2 + 2.0f * p3).norm() < kFarLineFactor * tol_line) return false;
+        continue;
+      }
+      if (grow.ptr<uint8_t>(y1)[x1] != 0) continue;
+      const int x2 = x1, y2 = y1;
+      const Vec3f& p2 = xyz(x2, y2);
+      const float h2 = frame.H(p2);
+      wall_next = wall_next || std::fabs(h2 - hq) > kWallRise * spacing;
+      // Foot test: samples of parallel, evenly spaced rays on a plane are evenly spaced on a
+      // line, so q is on the wall when it continues the run of barrier samples q + 2d, q + d.
+      // A canvas sample before the wall misses that point by (its distance to the wall) /
+      // sin(view angle).
+      const int x3 = x2 + kDx[d], y3 = y2 + kDy[d];
+      if (!inside(x3, y3) || !usable_at(x3, y3) || grow.ptr<uint8_t>(y3)[x3] != 0) continue;
+      const Vec3f& p3 = xyz(x3, y3);
+      const float rise = std::fabs(frame.H(p3) - h2);
+      if (!(rise > rise_line && rise > kLineSlope * (frame.UV(p3) - frame.UV(p2)).norm())) continue;
+      if ((pq - 2.0f * p2 + p3).norm() < tol_line) return false;
+    }
+    const double tol = wall_next ? tol_tight : tol_loose;
+    const bool dbg = getenv("CDBG") && qx == atoi(getenv("CDBG")) && qy == atoi(strchr(getenv("CDBG"), ',') + 1);
+    if (dbg) fprintf(stderr, "q %d,%d h %.4f wall_next %d tol %.4f\n", qx, qy, hq, wall_next, tol);
+    // Every region neighbour must agree: small step, and q on the linear extrapolation of the
+    // region through that neighbour.
+    int agree = 0;
+    for (int d = 0; d < 4; ++d) {
+      const int rx = qx - kDx[d], ry = qy - kDy[d];
+      if (!inside(rx, ry) || !in[idx(rx, ry)] || !usable_at(rx, ry)) continue;
+      const float hr = frame.H(xyz(rx, ry));
+      if (!(std::fabs(hq - hr) < step_mm)) return false;
+      const int r2x = rx - kDx[d], r2y = ry - kDy[d];
+      double second = hq - hr;
+      if (inside(r2x, r2y) && in[idx(r2x, r2y)] != 0 && usable_at(r2x, r2y))
+        second = hq - 2.0 * hr + frame.H(xyz(r2x, r2y));
+      if (dbg) fprintf(stderr, "  d %d hr %.4f second %.4f in2 %d\n", d, hr, second, in[idx(r2x, r2y)]);
+      if (!(std::fabs(second) < tol)) return false;
+      ++agree;
+    }
+    return agree > 0;
+  };
+  TMARK("core+spacing")
+  // Initial frontier: pixels outside the core with a 4-neighbour inside.
+  std::vector<int> frontier;  // packed y * w + x
+  {
+    cv::Mat ring;
+    cv::dilate(mask, ring, cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3)));
+    cv::bitwise_xor(ring, mask, ring);
+    frontier = NonZeroIndices(ring);
+  }
+  TMARK("frontier0")
+  std::vector<int> accepted, missing_edge;
+  size_t refined_total = 0;
+  for (int step = 0; step < kPeelPx + options.refine_px && !frontier.empty(); ++step) {
+    accepted.clear();
+    for (int q : frontier) {
+      const int qx = q % w, qy = q / w;
+      if (in[idx(qx, qy)]) continue;
+      if (!usable_at(qx, qy)) {
+        missing_edge.push_back(q);
+        continue;
+      }
+      if (accept(qx, qy)) accepted.push_back(q);
+    }
+    for (int q : accepted) in[static_cast<size_t>(q)] = 255;
+    if (getenv("CDBG")) for (int q : accepted) if (q % w == 121 && q / w < 110) fprintf(stderr, "step %d accepted %d,%d\n", step, q % w, q / w);
+    refined_total += accepted.size();
+    frontier.clear();
+    for (int q : accepted) {
+      const int qx = q % w, qy = q / w;
+      for (int d = 0; d < 4; ++d) {
+        const int nx = qx + kDx[d], ny = qy + kDy[d];
+        if (inside(nx, ny) && !in[idx(nx, ny)]) frontier.push_back(ny * w + nx);
+      }
+    }
+  }
+  TMARK("refine")
+  // Missing pixels on the boundary whose opposite neighbours are both canvas: the canvas as seen
+  // by the scanner is convex along rows and columns, so they are canvas too.
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<int> add;
+    for (int q : missing_edge) {
+      const int qx = q % w, qy = q / w;
+      if (in[idx(qx, qy)]) continue;
+      const bool row = qx > 0 && qx + 1 < w && in[idx(qx - 1, qy)] && in[idx(qx + 1, qy)];
+      const bool col = qy > 0 && qy + 1 < h && in[idx(qx, qy - 1)] && in[idx(qx, qy + 1)];
+      if (row || col) add.push_back(q);
+    }
+    for (int q : add) in[static_cast<size_t>(q)] = 255;
+    if (add.empty()) break;
+    // Their missing neighbours become candidates too.
+    for (int q : add) {
+      const int qx = q % w, qy = q / w;
+      for (int d = 0; d < 4; ++d) {
+        const int nx = qx + kDx[d], ny = qy + kDy[d];
+        if (inside(nx, ny) && !in[idx(nx, ny)] && !usable_at(nx, ny))
+          missing_edge.push_back(ny * w + nx);
+      }
+    }
+  }
+  TMARK("convex")
+  cv::Mat final_mask = mask;
+  {
+    const cv::Mat holes = EnclosedIslands(final_mask);
+    cv::bitwise_or(final_mask, holes, final_mask);
+  }
+
+  TMARK("final islands")
+  // ---- 6. Canvas frame.
+  const Vec3d n = plane.axes.col(2);
+  Vec3d x_axis;
+  {
+    Vec3d scan_x = Vec3d::UnitX() - n.x() * n;  // scan +X projected on the plane
+    if (scan_x.norm() < 1e-6) scan_x = plane.axes.col(0);
+    scan_x.normalize();
+    const double l1 = plane.eigenvalues(0), l2 = plane.eigenvalues(1);
+    if (l1 - l2 <= kIsotropicEigen * l1) {
+      x_axis = scan_x;
+    } else {
+      const Vec3d a = plane.axes.col(0), b = plane.axes.col(1);
+      x_axis = std::fabs(a.dot(scan_x)) >= std::fabs(b.dot(scan_x)) ? a : b;
+      if (x_axis.dot(scan_x) < 0) x_axis = -x_axis;
+    }
+  }
+  const Vec3d y_axis = n.cross(x_axis).normalized();
+  x_axis = y_axis.cross(n).normalized();
+  Mat3d rot;
+  rot.row(0) = x_axis.transpose();
+  rot.row(1) = y_axis.transpose();
+  rot.row(2) = n.transpose();
+  const Vec3d c0 = plane.centroid;
+  struct Box {
+    double x0 = std::numeric_limits<double>::max(), y0 = std::numeric_limits<double>::max();
+    double x1 = std::numeric_limits<double>::lowest(), y1 = std::numeric_limits<double>::lowest();
+    size_t count = 0;              // points in the rectangle
+    size_t mask_px = 0, kept_px = 0;  // mask pixels; of those, in the grown + filled region
+  };
+  // Bounding rectangle of the mask points, the output mask and its counts in one parallel pass.
+  CanvasResult result;
+  result.mask_scan = Grid<uint8_t>(w, h, 0);
+  auto box_of = [&](bool bound_height) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<int>(0, h), Box{},
+        [&](const tbb::blocked_range<int>& rows, Box b) {
+          for (int y = rows.begin(); y < rows.end(); ++y) {
+            const uint8_t* m = final_mask.ptr<uint8_t>(y);
+            const uint8_t* f = filled.ptr<uint8_t>(y);
+            const Vec3f* row = xyz.Row(y);
+            uint8_t* out = result.mask_scan.Row(y);
+            for (int x = 0; x < w; ++x) {
+              if (!m[x]) continue;
+              out[x] = 1;
+              ++b.mask_px;
+              b.kept_px += f[x] != 0;
+              if (!Usable(row[x])) continue;
+              const Vec3d q = rot * (row[x].cast<double>() - c0);
+              if (bound_height && std::fabs(q.z()) > kBoundHeightMm) continue;
+              b.x0 = std::min(b.x0, q.x());
+              b.x1 = std::max(b.x1, q.x());
+              b.y0 = std::min(b.y0, q.y());
+              b.y1 = std::max(b.y1, q.y());
+              ++b.count;
+            }
+          }
+          return b;
+        },
+        [](Box a, const Box& b) {
+          a.x0 = std::min(a.x0, b.x0);
+          a.y0 = std::min(a.y0, b.y0);
+          a.x1 = std::max(a.x1, b.x1);
+          a.y1 = std::max(a.y1, b.y1);
+          a.count += b.count;
+          a.mask_px += b.mask_px;
+          a.kept_px += b.kept_px;
+          return a;
+        });
+  };
+  Box box = box_of(true);
+  if (box.count == 0) box = box_of(false);
+  if (box.count == 0) return Error{src + ": the canvas mask holds no valid sample"};
+  TMARK("box+mask")
+
+  result.canvas_from_scan.rotation = rot;
+  result.canvas_from_scan.translation = -(rot * c0) - Vec3d(box.x0, box.y0, 0);
+  result.extent_mm = Eigen::Vector2d(box.x1 - box.x0, box.y1 - box.y0);
+  result.plane_rms_mm = std::sqrt(plane.eigenvalues(2));
+  result.noise_sigma_mm = noise_sigma;
+  result.grown_px = static_cast<size_t>(grown);
+  result.islands_filled_px = islands_px;
+  result.refined_px = box.mask_px - box.kept_px;
+  result.plane_points = plane.count;
+  result.seed_x = sx;
+  result.seed_y = sy;
+  (void)refined_total;
+  return result;
+}
+
+}  // namespace digitize

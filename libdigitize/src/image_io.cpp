@@ -1,0 +1,223 @@
+// Image files through OpenImageIO, and atomic replacement of output files.
+#include "digitize/image_io.h"
+
+#include <OpenImageIO/imageio.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <exception>
+#include <fstream>
+#include <new>
+#include <string>
+#include <system_error>
+
+namespace digitize {
+namespace {
+
+namespace fs = std::filesystem;
+
+static_assert(sizeof(Vec3f) == 3 * sizeof(float), "Grid<Vec3f> must be interleaved floats");
+static_assert(sizeof(std::array<uint8_t, 3>) == 3, "Grid<RGB8> must be interleaved bytes");
+
+// OIIO errors can span lines; messages here are one line each.
+std::string OneLine(std::string text) {
+  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
+  for (size_t pos; (pos = text.find('\n')) != std::string::npos;) text.replace(pos, 1, "; ");
+  return text;
+}
+
+// "name.exr" -> ".name.exr.tmp-<pid>-<n>.exr": hidden, unique per process and call, and still
+// ending in the real extension for any writer that picks the format from the name.
+fs::path TempPathFor(const fs::path& path) {
+  static std::atomic<uint64_t> counter{0};
+  const std::string name = path.filename().string();
+  const std::string temp_name = "." + name + ".tmp-" + std::to_string(::getpid()) + "-" +
+                                std::to_string(counter.fetch_add(1)) + path.extension().string();
+  return path.parent_path() / temp_name;
+}
+
+// Writes interleaved pixels of one type through the OIIO writer named by `format`.
+Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSpec& spec,
+                   const void* pixels) {
+  if (spec.width <= 0 || spec.height <= 0) {
+    return Error{path.string() + ": cannot write an empty image (" + std::to_string(spec.width) +
+                 "x" + std::to_string(spec.height) + ")"};
+  }
+  return WriteAtomically(path, [&](const fs::path& temp) -> Status {
+    auto out = OIIO::ImageOutput::create(format);
+    if (!out)
+      return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
+    OIIO::ImageSpec file_spec = spec;
+    if (!out->open(temp.string(), file_spec)) {
+      return Error{path.string() + ": cannot open for writing: " + OneLine(out->geterror())};
+    }
+    const bool wrote = out->write_image(spec.format, pixels);
+    const bool closed = out->close();
+    if (!wrote || !closed)
+      return Error{path.string() + ": write failed: " + OneLine(out->geterror())};
+    return Status::Ok();
+  });
+}
+
+OIIO::ImageSpec ExrSpec(int width, int height, const std::vector<std::string>& channels,
+                        const ImageMetadata& metadata) {
+  OIIO::ImageSpec spec(width, height, static_cast<int>(channels.size()), OIIO::TypeDesc::FLOAT);
+  spec.channelnames = channels;
+  spec.alpha_channel = -1;
+  spec.attribute("compression", "zip");
+  for (const auto& [key, value] : metadata) spec.attribute(key, value);
+  return spec;
+}
+
+template <class T>
+void CheckStorage(const Grid<T>& image) {
+  DIGITIZE_CHECK(image.data.size() == static_cast<size_t>(image.width) * image.height,
+                 "image grid storage does not match its " + std::to_string(image.width) + "x" +
+                     std::to_string(image.height) + " size");
+}
+
+bool IsIntegerType(OIIO::TypeDesc type) {
+  return type.basetype != OIIO::TypeDesc::FLOAT && type.basetype != OIIO::TypeDesc::HALF &&
+         type.basetype != OIIO::TypeDesc::DOUBLE;
+}
+
+std::string JoinNames(const std::vector<std::string>& names) {
+  std::string joined;
+  for (const auto& n : names) joined += (joined.empty() ? "" : ",") + n;
+  return joined;
+}
+
+}  // namespace
+
+Status WriteAtomically(const fs::path& path,
+                       const std::function<Status(const fs::path& temp_path)>& write) {
+  if (path.filename().empty()) return Error{path.string() + ": not a file name"};
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) {
+    return Error{path.string() + ": cannot write, directory " + dir.string() + " does not exist"};
+  }
+  if (fs::is_directory(path, ec)) return Error{path.string() + ": is a directory"};
+
+  const fs::path temp = TempPathFor(path);
+  Status status;
+  try {
+    status = write(temp);
+  } catch (const std::exception& e) {
+    status = Error{path.string() + ": write failed: " + e.what()};
+  } catch (...) {
+    status = Error{path.string() + ": write failed with an unknown exception"};
+  }
+  if (status.ok() && !fs::is_regular_file(temp, ec)) {
+    status = Error{path.string() + ": the writer reported success but produced no file"};
+  }
+  if (status.ok()) {
+    fs::rename(temp, path, ec);
+    if (ec)
+      status = Error{path.string() + ": cannot move the finished file into place: " + ec.message()};
+  }
+  if (!status.ok()) fs::remove(temp, ec);  // best effort; the error already says what failed
+  return status;
+}
+
+Status WriteTextFile(const fs::path& path, const std::string& text) {
+  return WriteAtomically(path, [&](const fs::path& temp) -> Status {
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out) return Error{path.string() + ": cannot open for writing"};
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.close();
+    if (!out) return Error{path.string() + ": write failed (disk full?)"};
+    return Status::Ok();
+  });
+}
+
+Status WriteFloatExr(const fs::path& path, const Grid<float>& image, const std::string& channel,
+                     const ImageMetadata& metadata) {
+  CheckStorage(image);
+  const auto spec = ExrSpec(image.width, image.height, {channel}, metadata);
+  return WritePixels(path, "openexr", spec, image.data.data());
+}
+
+Status WriteFloatExr(const fs::path& path, const Grid<Vec3f>& image,
+                     const std::array<std::string, 3>& channels, const ImageMetadata& metadata) {
+  CheckStorage(image);
+  const auto spec =
+      ExrSpec(image.width, image.height, {channels[0], channels[1], channels[2]}, metadata);
+  return WritePixels(path, "openexr", spec, image.data.data());
+}
+
+Status WritePng8(const fs::path& path, const Grid<uint8_t>& image) {
+  CheckStorage(image);
+  const OIIO::ImageSpec spec(image.width, image.height, 1, OIIO::TypeDesc::UINT8);
+  return WritePixels(path, "png", spec, image.data.data());
+}
+
+Status WritePngRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image) {
+  CheckStorage(image);
+  const OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+  return WritePixels(path, "png", spec, image.data.data());
+}
+
+Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
+  const std::string name = path.string();
+  std::error_code ec;
+  const auto file_status = fs::status(path, ec);
+  if (!fs::exists(file_status)) return Error{name + ": no such file"};
+  if (fs::is_directory(file_status)) return Error{name + ": is a directory, not an image"};
+  if (fs::is_regular_file(file_status) && fs::file_size(path, ec) == 0 && !ec) {
+    return Error{name + ": empty file (0 bytes)"};
+  }
+
+  auto in = OIIO::ImageInput::open(name);
+  if (!in) {
+    return Error{name + ": unreadable, not an image OpenImageIO can open (" +
+                 OneLine(OIIO::geterror()) + ")"};
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.depth != 1) {
+    return Error{name + ": zero-sized or volume image (" + std::to_string(spec.width) + "x" +
+                 std::to_string(spec.height) + "x" + std::to_string(spec.depth) + ")"};
+  }
+  // Checked before allocating: a corrupt header can claim billions of pixels.
+  const auto pixels = static_cast<uint64_t>(spec.width) * static_cast<uint64_t>(spec.height);
+  if (pixels > max_pixels) {
+    return Error{name + ": too large, " + std::to_string(spec.width) + "x" +
+                 std::to_string(spec.height) + " = " + std::to_string(pixels) +
+                 " pixels exceeds the limit of " + std::to_string(max_pixels)};
+  }
+  if (spec.nchannels != 1 && spec.nchannels != 3) {
+    return Error{name + ": " + std::to_string(spec.nchannels) + " channels (" +
+                 JoinNames(spec.channelnames) +
+                 "); only 1-channel (height, mask) or 3-channel (X,Y,Z or RGB) images are read"};
+  }
+
+  FloatImage image;
+  image.width = spec.width;
+  image.height = spec.height;
+  image.channels = spec.nchannels;
+  image.format = in->format_name();
+  image.integer_samples = IsIntegerType(spec.format);
+  image.bits_per_sample =
+      spec.get_int_attribute("oiio:BitsPerSample", static_cast<int>(spec.format.size() * 8));
+  image.channel_names = spec.channelnames;
+  for (const auto& attribute : spec.extra_attribs) {
+    if (attribute.type() == OIIO::TypeString) {
+      image.metadata[attribute.name().string()] = attribute.get_string();
+    }
+  }
+  try {
+    image.pixels.resize(pixels * static_cast<uint64_t>(spec.nchannels));
+  } catch (const std::bad_alloc&) {
+    return Error{name + ": not enough memory for " + std::to_string(pixels) + " pixels"};
+  }
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
+    return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
+  }
+  if (in->has_error()) {
+    return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
+  }
+  in->close();
+  return image;
+}
+
+}  // namespace digitize

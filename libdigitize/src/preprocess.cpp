@@ -1,0 +1,293 @@
+#include "digitize/preprocess.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "digitize/image_io.h"
+
+namespace digitize {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+std::string Format(const char* fmt, auto... args) {
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer), fmt, args...);
+  return buffer;
+}
+
+constexpr double kSteps = 6;  // progress: each step counts as one sixth
+
+double Percent(size_t part, size_t whole) { return whole ? 100.0 * part / whole : 0.0; }
+
+template <class T>
+bool AllFinite(const Grid<T>& grid) {
+  for (const T& v : grid.data) {
+    if constexpr (std::is_same_v<T, float>) {
+      if (!std::isfinite(v)) return false;
+    } else {
+      if (!v.allFinite()) return false;
+    }
+  }
+  return true;
+}
+
+nlohmann::json TransformJson(const RigidTransform& t) {
+  nlohmann::json rotation = nlohmann::json::array();
+  for (int r = 0; r < 3; ++r) rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
+  return {{"rotation", rotation},
+          {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
+}
+
+}  // namespace
+
+Status PreprocessOptions::Validate() const {
+  for (const auto& [name, status] :
+       {std::pair{"merge", merge.Validate()}, std::pair{"sanitize", sanitize.Validate()},
+        std::pair{"canvas", canvas.Validate()}, std::pair{"resample", resample.Validate()},
+        std::pair{"relief", relief.Validate()}}) {
+    if (!status.ok()) return Error{std::string(name) + " options: " + status.message()};
+  }
+  return Status::Ok();
+}
+
+Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
+                                    const PreprocessOptions& options,
+                                    const ProgressCallback& progress) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  if (exposures.empty()) return Error{"preprocess: no scan given"};
+
+  PreprocessResult result;
+  const auto start = Clock::now();
+  auto step = [&](const char* name, Clock::time_point t0, std::string line) {
+    result.steps.push_back({name, SecondsSince(t0), std::move(line)});
+  };
+
+  // Merge the exposures of one pose (a single exposure passes through untouched).
+  auto t0 = Clock::now();
+  ReportProgress(progress, "merge", 0.0 / kSteps);
+  Scan scan;
+  if (exposures.size() == 1) {
+    scan = std::move(exposures.front());
+    result.merge.exposures = 1;
+  } else {
+    Result<Scan> merged = MergeExposures(exposures, options.merge, &result.merge);
+    if (!merged.ok()) return merged.error();
+    scan = std::move(merged).value();
+  }
+  step("merge", t0,
+       Format("merge: %d exposure(s) of %dx%d, %zu samples filled from other exposures, %zu disagreeing",
+              result.merge.exposures, scan.xyz_mm.width, scan.xyz_mm.height,
+              result.merge.filled_from_others, result.merge.disagreeing));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "sanitize", 1.0 / kSteps);
+  result.sanitize = SanitizeScan(scan, options.sanitize);
+  const SanitizeStats& ss = result.sanitize;
+  step("sanitize", t0,
+       Format("sanitize: %zu of %zu samples valid (%.1f %%); %zu missing, %zu non-finite or absurd, "
+              "%zu isolated spikes removed",
+              ss.valid, ss.total, Percent(ss.valid, ss.total), ss.missing, ss.non_finite, ss.spikes));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "canvas", 2.0 / kSteps);
+  Result<CanvasResult> canvas = ExtractCanvas(scan, options.canvas);
+  if (!canvas.ok()) return canvas.error();
+  result.canvas = std::move(canvas).value();
+  const CanvasResult& c = result.canvas;
+  const Vec3d normal_scan = c.canvas_from_scan.rotation.row(2).transpose();
+  step("canvas", t0,
+       Format("canvas: %.1f x %.1f mm, plane tilted %.3f deg from the scanner axis, plane RMS %.4f mm, "
+              "noise sigma %.4f mm; region %zu px (+%zu islands, +%zu boundary), seed (%d, %d)",
+              c.extent_mm.x(), c.extent_mm.y(), AngleDeg(normal_scan, -Vec3d::UnitZ()),
+              c.plane_rms_mm, c.noise_sigma_mm, c.grown_px, c.islands_filled_px, c.refined_px,
+              c.seed_x, c.seed_y));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "resample", 3.0 / kSteps);
+  Result<HeightField> field = ResampleToCanvasGrid(scan, result.canvas, options.resample, &result.resample);
+  if (!field.ok()) return field.error();
+  result.field = std::move(field).value();
+  const ResampleStats& rs = result.resample;
+  step("resample", t0,
+       Format("resample: %dx%d texels at %.4f mm; %zu measured, %zu filled in %zu small hole(s), "
+              "%zu unfilled in %zu large hole(s)",
+              result.field.width(), result.field.height(), result.field.pitch_mm, rs.measured,
+              rs.filled, rs.holes_filled, rs.unfilled, rs.holes_unfilled));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "relief", 4.0 / kSteps);
+  ReliefOptions relief_options = options.relief;
+  if (options.noise_margin_from_scan) relief_options.noise_margin_mm = 2.0 * c.noise_sigma_mm;
+  result.relief = ClassifyRelief(result.field, relief_options);
+  const ReliefResult& r = result.relief;
+  step("relief", t0,
+       Format("relief: max height %.3f mm, delta0 %.3f mm; %zu texels above in %zu component(s) "
+              "(%zu specks removed); %zu boxes of %dx%d texels",
+              r.max_height_mm, r.delta0_mm, r.texels_above, r.components_kept, r.components_removed,
+              r.boxes.size(), r.cell_px, r.cell_px));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "normals", 5.0 / kSteps);
+  result.normals = ComputeNormals(result.field);
+  step("normals", t0, Format("normals: %dx%d from 8-neighbourhood triangles", result.normals.width,
+                             result.normals.height));
+  ReportProgress(progress, "done", 1.0);
+
+  // The contract is "no NaN/Inf ever leaves a stage": a violation is a bug, not bad input.
+  DIGITIZE_CHECK(AllFinite(result.field.height_mm), "preprocess produced a non-finite height");
+  DIGITIZE_CHECK(AllFinite(result.normals), "preprocess produced a non-finite normal");
+  result.total_seconds = SecondsSince(start);
+  return result;
+}
+
+std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
+                                 const std::vector<std::string>& inputs) {
+  using nlohmann::json;
+  const CanvasResult& c = result.canvas;
+  json steps = json::array();
+  for (const StepReport& s : result.steps)
+    steps.push_back({{"name", s.name}, {"seconds", s.seconds}, {"summary", s.line}});
+  json report = {
+      {"format", "digitize.preprocess_report"},
+      {"version", 1},
+      {"tool_version", DIGITIZE_VERSION},
+      {"inputs", inputs},
+      {"steps", steps},
+      {"total_seconds", result.total_seconds},
+      {"sanitize",
+       {{"total", result.sanitize.total},
+        {"missing", result.sanitize.missing},
+        {"non_finite", result.sanitize.non_finite},
+        {"spikes", result.sanitize.spikes},
+        {"valid", result.sanitize.valid}}},
+      {"merge",
+       {{"exposures", result.merge.exposures},
+        {"filled_from_others", result.merge.filled_from_others},
+        {"disagreeing", result.merge.disagreeing}}},
+      {"canvas",
+       {{"extent_mm", {c.extent_mm.x(), c.extent_mm.y()}},
+        {"plane_rms_mm", c.plane_rms_mm},
+        {"noise_sigma_mm", c.noise_sigma_mm},
+        {"grown_px", c.grown_px},
+        {"islands_filled_px", c.islands_filled_px},
+        {"refined_px", c.refined_px},
+        {"plane_points", c.plane_points},
+        {"seed_px", {c.seed_x, c.seed_y}},
+        {"canvas_from_scan", TransformJson(c.canvas_from_scan)}}},
+      {"resample",
+       {{"pitch_mm", result.field.pitch_mm},
+        {"size_texels", {result.field.width(), result.field.height()}},
+        {"measured", result.resample.measured},
+        {"filled", result.resample.filled},
+        {"unfilled", result.resample.unfilled},
+        {"outside", result.resample.outside},
+        {"holes_filled", result.resample.holes_filled},
+        {"holes_unfilled", result.resample.holes_unfilled},
+        {"triangles_drawn", result.resample.triangles_drawn},
+        {"triangles_skipped", result.resample.triangles_skipped}}},
+      {"relief",
+       {{"max_height_mm", result.relief.max_height_mm},
+        {"delta0_mm", result.relief.delta0_mm},
+        {"cell_px", result.relief.cell_px},
+        {"boxes", result.relief.boxes.size()},
+        {"texels_above", result.relief.texels_above},
+        {"components_kept", result.relief.components_kept},
+        {"components_removed", result.relief.components_removed}}},
+      {"options",
+       {{"sanitize",
+         {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
+          {"spike_mm", options.sanitize.spike_mm}}},
+        {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
+        {"canvas",
+         {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
+          {"refine_step_mm", options.canvas.refine_step_mm},
+          {"refine_px", options.canvas.refine_px},
+          {"erode_px", options.canvas.erode_px},
+          {"trim_sigmas", options.canvas.trim_sigmas},
+          {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
+        {"resample",
+         {{"pitch_mm", options.resample.pitch_mm},
+          {"max_edge_factor", options.resample.max_edge_factor},
+          {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
+        {"relief",
+         {{"delta0_fraction", options.relief.delta0_fraction},
+          {"min_component_area_mm2", options.relief.min_component_area_mm2},
+          {"cell_px", options.relief.cell_px},
+          {"noise_margin_from_scan", options.noise_margin_from_scan}}}}},
+  };
+  return report.dump(2) + "\n";
+}
+
+Status WritePreprocessOutputs(const std::filesystem::path& dir, const PreprocessResult& result,
+                              const PreprocessOptions& options,
+                              const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return Error{dir.string() + ": cannot create the output folder: " + ec.message()};
+
+  const HeightField& f = result.field;
+  const ImageMetadata meta = {{"digitize:pitch_mm", Format("%.9g", f.pitch_mm)},
+                              {"digitize:frame", "canvas (docs/formats.md)"},
+                              {"digitize:version", DIGITIZE_VERSION}};
+  ImageMetadata height_meta = meta;
+  height_meta["digitize:quantity"] = "height_mm";
+  if (Status s = WriteFloatExr(dir / "height.exr", f.height_mm, "Y", height_meta); !s.ok()) return s;
+
+  ImageMetadata normal_meta = meta;
+  normal_meta["digitize:quantity"] = "unit normal (nx, ny, nz) in R, G, B";
+  if (Status s = WriteFloatExr(dir / "normals.exr", result.normals, {"R", "G", "B"}, normal_meta); !s.ok())
+    return s;
+
+  // Mask values are spread over 0..255 so the PNG is readable by eye (docs/formats.md).
+  Grid<uint8_t> mask(f.width(), f.height());
+  for (size_t i = 0; i < mask.size(); ++i) {
+    switch (f.state.data[i]) {
+      case TexelState::kOutside: mask.data[i] = 0; break;
+      case TexelState::kUnfilled: mask.data[i] = 85; break;
+      case TexelState::kFilled: mask.data[i] = 170; break;
+      case TexelState::kMeasured: mask.data[i] = 255; break;
+    }
+  }
+  if (Status s = WritePng8(dir / "mask.png", mask); !s.ok()) return s;
+
+  Grid<uint8_t> scan_mask = result.canvas.mask_scan;
+  for (uint8_t& v : scan_mask.data) v = v ? 255 : 0;
+  if (Status s = WritePng8(dir / "canvas_mask_scan.png", scan_mask); !s.ok()) return s;
+
+  using nlohmann::json;
+  json boxes = json::array();
+  for (const ReliefBox& b : result.relief.boxes)
+    boxes.push_back({{"x0", b.x0}, {"y0", b.y0}, {"width", b.width}, {"height", b.height},
+                     {"h_max_mm", b.h_max_mm}, {"u_max", b.u_max}, {"v_max", b.v_max}});
+  json boxes_doc = {{"format", "digitize.boxes"},
+                    {"version", 1},
+                    {"units", "texels; heights in mm"},
+                    {"grid_size_texels", {f.width(), f.height()}},
+                    {"pitch_mm", f.pitch_mm},
+                    {"cell_px", result.relief.cell_px},
+                    {"delta0_mm", result.relief.delta0_mm},
+                    {"max_height_mm", result.relief.max_height_mm},
+                    {"boxes", boxes}};
+  if (Status s = WriteTextFile(dir / "boxes.json", boxes_doc.dump(1) + "\n"); !s.ok()) return s;
+
+  json transform = {{"format", "digitize.transform"},
+                    {"version", 1},
+                    {"canvas_from_scan", TransformJson(result.canvas.canvas_from_scan)},
+                    {"pitch_mm", f.pitch_mm},
+                    {"size_texels", {f.width(), f.height()}},
+                    {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
+                    {"texel_centre",
+                     "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
+  if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
+
+  return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
+}
+
+}  // namespace digitize

@@ -1,0 +1,608 @@
+// Resampling onto the canvas grid (resample.h).
+//
+// 1. Canvas samples (mask & usable) go to the canvas frame, then to continuous texel coordinates
+//    (texel centres at integers; height_field.h's row flip).
+// 2. Per scan quad: which of its (at most two) triangles are drawn. Four valid corners: split
+//    along the shorter 3D diagonal; three: the one triangle they make; any edge longer than the
+//    edge limit: that triangle is skipped (it spans a step or a gap).
+// 3. Rasterisation, race-free: the output rows are cut into bands; every chunk of kChunk quads of
+//    a scan row is listed in the bands its texel-row range meets, and each band (one task) draws
+//    only its own rows. Linear (barycentric) interpolation; overlaps keep the highest.
+// 4. Holes: the canvas outline is the covered texels closed by a few texels (the outline is a
+//    convex quadrilateral, which closing preserves) plus everything it encloses. Uncovered texels
+//    inside are holes: connected components, filled by push-pull interpolation relaxed towards a
+//    harmonic (membrane) fill, each component in its own task; small ones kFilled, large ones
+//    kUnfilled.
+#include "digitize/resample.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+static double NowS() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+static double CpuS() { timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + t.tv_nsec * 1e-9; }
+#define TMARK(name) if (getenv("CTIME")) { double t_ = NowS(), c_ = CpuS(); fprintf(stderr, "  R %-14s wall %6.1f ms cpu %6.1f ms\n", name, (t_ - tmark_) * 1e3, (c_ - cmark_) * 1e3); tmark_ = t_; cmark_ = c_; }
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+namespace digitize {
+namespace {
+
+constexpr float kMaxAbsCoordinateMm = 1e6f;  // as canvas.cpp: beyond is sensor garbage
+constexpr int kChunk = 32;                   // quads per chunk of a scan row (rasteriser lists)
+constexpr int kBandRows = 32;                // output rows per rasteriser task
+constexpr float kBaryEps = 1e-5f;            // texel centres on a shared edge go to both sides
+constexpr size_t kStatSamples = 250000;      // subsample size for the median spacing
+constexpr int kMinCloseRadiusTx = 2;         // outline closing radius, texels (at least)
+constexpr int kMaxRelaxIterations = 200;     // membrane relaxation of a filled hole
+constexpr int kUnfilledRelaxIterations = 20; // large holes: continuity only
+constexpr float kLowest = std::numeric_limits<float>::lowest();
+
+inline bool Usable(const Vec3f& p) {
+  return std::fabs(p.x()) <= kMaxAbsCoordinateMm && std::fabs(p.y()) <= kMaxAbsCoordinateMm &&
+         std::fabs(p.z()) <= kMaxAbsCoordinateMm;
+}
+
+struct TexelPoint {
+  float x, y, h;  // continuous texel column, row; height (mm)
+  bool ok() const { return x == x; }
+};
+
+// Triangles of a quad with corners A = (x, y), B = (x+1, y), C = (x, y+1), D = (x+1, y+1).
+enum : uint8_t { kABD = 1, kADC = 2, kABC = 4, kBDC = 8 };
+
+struct Counts {
+  size_t drawn = 0, skipped = 0;
+};
+
+// Median 3D distance between 4-neighbours (dx, dy) that are both usable canvas samples.
+double MedianSpacing(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, int dx, int dy,
+                     size_t count) {
+  const int stride =
+      std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count) / kStatSamples)));
+  std::vector<float> d;
+  for (int y = 0; y + dy < xyz.height; y += stride)
+    for (int x = 0; x + dx < xyz.width; x += stride) {
+      if (!mask(x, y) || !mask(x + dx, y + dy)) continue;
+      const Vec3f& p = xyz(x, y);
+      const Vec3f& q = xyz(x + dx, y + dy);
+      if (Usable(p) && Usable(q)) d.push_back((q - p).norm());
+    }
+  if (d.empty()) return 0;
+  const size_t mid = d.size() / 2;
+  std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(mid), d.end());
+  return d[mid];
+}
+
+// canvas texel coordinates of a scan sample: m (p - ref) + t.
+struct TexelTransform {
+  Eigen::Vector3f ref = Eigen::Vector3f::Zero();
+  Eigen::Matrix3f m = Eigen::Matrix3f::Identity();
+  Eigen::Vector3f t = Eigen::Vector3f::Zero();
+};
+
+// Texel points of n consecutive samples of a scan row; NaN where not a usable canvas sample.
+inline void TexelRow(const Vec3f* in, const uint8_t* mask, int n, const TexelTransform& tf,
+                     TexelPoint* out) {
+  const float nanf = std::numeric_limits<float>::quiet_NaN();
+  for (int k = 0; k < n; ++k) {
+    if (mask[k] && Usable(in[k])) {
+      const Eigen::Vector3f p = tf.m * (in[k] - tf.ref) + tf.t;
+      out[k] = {p.x(), p.y(), p.z()};
+    } else {
+      out[k] = {nanf, nanf, nanf};
+    }
+  }
+}
+
+// ceil / floor without a libm call; far-away values are clamped (the callers clamp to the grid).
+inline int CeilInt(float v) {
+  v = std::clamp(v, -1e9f, 1e9f);
+  const int i = static_cast<int>(v);
+  return i + (v > i);
+}
+inline int FloorInt(float v) {
+  v = std::clamp(v, -1e9f, 1e9f);
+  const int i = static_cast<int>(v);
+  return i - (v < i);
+}
+
+// Rasterises one triangle into rows [row0, row1] of `out` (width w), keeping the maximum. Float
+// edge functions relative to vertex a: the differences of nearby coordinates are exact.
+inline void DrawTriangle(const TexelPoint& a, const TexelPoint& b, const TexelPoint& c, int w,
+                         int row0, int row1, float* out) {
+  const float minx = std::min({a.x, b.x, c.x}), maxx = std::max({a.x, b.x, c.x});
+  const float miny = std::min({a.y, b.y, c.y}), maxy = std::max({a.y, b.y, c.y});
+  const int i0 = std::max(0, CeilInt(minx)), i1 = std::min(w - 1, FloorInt(maxx));
+  if (i0 > i1) return;
+  const int j0 = std::max(row0, CeilInt(miny)), j1 = std::min(row1, FloorInt(maxy));
+  if (j0 > j1) return;
+  const float e1x = b.x - a.x, e1y = b.y - a.y;
+  const float e2x = c.x - a.x, e2y = c.y - a.y;
+  const float area = e1x * e2y - e2x * e1y;
+  if (!(std::fabs(area) > 1e-12f)) return;
+  const float inv = 1.0f / area;
+  const float dh1 = b.h - a.h, dh2 = c.h - a.h;
+  for (int j = j0; j <= j1; ++j) {
+    const float py = static_cast<float>(j) - a.y;
+    float* row = out + static_cast<size_t>(j) * w;
+    for (int i = i0; i <= i1; ++i) {
+      const float px = static_cast<float>(i) - a.x;
+      const float wb = (px * e2y - e2x * py) * inv;
+      const float wc = (e1x * py - px * e1y) * inv;
+      if (wb < -kBaryEps || wc < -kBaryEps || wb + wc > 1.0f + kBaryEps) continue;
+      const float value = a.h + wb * dh1 + wc * dh2;
+      if (value > row[i]) row[i] = value;
+    }
+  }
+}
+
+// Pixels of `mask` (0/255) not reachable from the border through non-mask pixels -> 255.
+cv::Mat EnclosedIslands(const cv::Mat& mask) {
+  cv::Mat inverse, padded;
+  cv::bitwise_not(mask, inverse);
+  cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
+  cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
+  return padded(cv::Rect(1, 1, mask.cols, mask.rows)).clone();
+}
+
+// Scratch space of the hole filler, one per thread (no per-hole allocation in steady state).
+struct FillScratch {
+  std::vector<float> val, wt;       // pyramid levels, concatenated
+  std::vector<int> level_offset, level_w, level_h;
+  std::vector<uint8_t> role;         // level-0 role: 0 ignore, 1 known, 2 unknown
+};
+
+// Fills the texels labelled `label` inside rect (which has a one-texel margin) from the covered
+// texels around them: push-pull initial values, then Gauss-Seidel relaxation of the membrane
+// equation. Writes only texels of this label; reads covered texels and its own.
+void FillHole(const cv::Rect& rect, int label, const cv::Mat& labels, const cv::Mat& covered,
+              float* height, int grid_w, int iterations, FillScratch& s) {
+  const int bw = rect.width, bh = rect.height;
+  s.level_offset.clear();
+  s.level_w.clear();
+  s.level_h.clear();
+  size_t total = 0;
+  for (int lw = bw, lh = bh;;) {
+    s.level_offset.push_back(static_cast<int>(total));
+    s.level_w.push_back(lw);
+    s.level_h.push_back(lh);
+    total += static_cast<size_t>(lw) * lh;
+    if (lw == 1 && lh == 1) break;
+    lw = (lw + 1) / 2;
+    lh = (lh + 1) / 2;
+  }
+  s.val.assign(total, 0.f);
+  s.wt.assign(total, 0.f);
+  s.role.assign(static_cast<size_t>(bw) * bh, 0);
+  bool any_known = false;
+  for (int y = 0; y < bh; ++y) {
+    const int gy = rect.y + y;
+    const int* lab = labels.ptr<int>(gy);
+    const uint8_t* cov = covered.ptr<uint8_t>(gy);
+    for (int x = 0; x < bw; ++x) {
+      const int gx = rect.x + x;
+      const size_t i = static_cast<size_t>(y) * bw + x;
+      if (cov[gx]) {
+        s.role[i] = 1;
+        s.val[i] = height[static_cast<size_t>(gy) * grid_w + gx];
+        s.wt[i] = 1;
+        any_known = true;
+      } else if (lab[gx] == label) {
+        s.role[i] = 2;
+      }
+    }
+  }
+  auto write_back = [&]() {
+    for (int y = 0; y < bh; ++y)
+      for (int x = 0; x < bw; ++x)
+        if (s.role[static_cast<size_t>(y) * bw + x] == 2)
+          height[static_cast<size_t>(rect.y + y) * grid_w + rect.x + x] =
+              s.val[static_cast<size_t>(y) * bw + x];
+  };
+  if (!any_known) {  // nothing to interpolate from: flat at the plane
+    for (float& v : s.val) v = 0;
+    write_back();
+    return;
+  }
+  const int levels = static_cast<int>(s.level_w.size());
+  // Push: weighted averages down the pyramid.
+  int top = levels - 1;
+  for (int l = 1; l < levels; ++l) {
+    const int pw = s.level_w[l - 1], ph = s.level_h[l - 1], lw = s.level_w[l], lh = s.level_h[l];
+    const float* pv = s.val.data() + s.level_offset[l - 1];
+    const float* pwt = s.wt.data() + s.level_offset[l - 1];
+    float* v = s.val.data() + s.level_offset[l];
+    float* wt = s.wt.data() + s.level_offset[l];
+    bool full = true;
+    for (int y = 0; y < lh; ++y)
+      for (int x = 0; x < lw; ++x) {
+        float sw = 0, sv = 0;
+        for (int dy = 0; dy < 2; ++dy)
+          for (int dx = 0; dx < 2; ++dx) {
+            const int cx = 2 * x + dx, cy = 2 * y + dy;
+            if (cx >= pw || cy >= ph) continue;
+            const size_t ci = static_cast<size_t>(cy) * pw + cx;
+            sw += pwt[ci];
+            sv += pwt[ci] * pv[ci];
+          }
+        const size_t i = static_cast<size_t>(y) * lw + x;
+        wt[i] = sw;
+        v[i] = sw > 0 ? sv / sw : 0;
+        full = full && sw > 0;
+      }
+    if (full) {
+      top = l;
+      break;
+    }
+  }
+  // Pull: empty cells take the bilinear interpolation of the coarser level.
+  for (int l = top - 1; l >= 0; --l) {
+    const int lw = s.level_w[l], lh = s.level_h[l], cw = s.level_w[l + 1], ch = s.level_h[l + 1];
+    float* v = s.val.data() + s.level_offset[l];
+    const float* wt = s.wt.data() + s.level_offset[l];
+    const float* cv = s.val.data() + s.level_offset[l + 1];
+    for (int y = 0; y < lh; ++y)
+      for (int x = 0; x < lw; ++x) {
+        const size_t i = static_cast<size_t>(y) * lw + x;
+        if (wt[i] > 0) continue;
+        const double fx = std::clamp((x + 0.5) / 2 - 0.5, 0.0, double(cw - 1));
+        const double fy = std::clamp((y + 0.5) / 2 - 0.5, 0.0, double(ch - 1));
+        const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+        const int x1 = std::min(x0 + 1, cw - 1), y1 = std::min(y0 + 1, ch - 1);
+        const double ax = fx - x0, ay = fy - y0;
+        const double top_v = (1 - ax) * cv[static_cast<size_t>(y0) * cw + x0] +
+                             ax * cv[static_cast<size_t>(y0) * cw + x1];
+        const double bot_v = (1 - ax) * cv[static_cast<size_t>(y1) * cw + x0] +
+                             ax * cv[static_cast<size_t>(y1) * cw + x1];
+        v[i] = static_cast<float>((1 - ay) * top_v + ay * bot_v);
+      }
+  }
+  // Relax: unknown texels towards the mean of their known / unknown 4-neighbours.
+  float* v = s.val.data();
+  for (int it = 0; it < iterations; ++it) {
+    float change = 0;
+    for (int y = 0; y < bh; ++y)
+      for (int x = 0; x < bw; ++x) {
+        const size_t i = static_cast<size_t>(y) * bw + x;
+        if (s.role[i] != 2) continue;
+        float sum = 0;
+        int n = 0;
+        if (x > 0 && s.role[i - 1]) sum += v[i - 1], ++n;
+        if (x + 1 < bw && s.role[i + 1]) sum += v[i + 1], ++n;
+        if (y > 0 && s.role[i - bw]) sum += v[i - bw], ++n;
+        if (y + 1 < bh && s.role[i + bw]) sum += v[i + bw], ++n;
+        if (n == 0) continue;
+        const float next = sum / n;
+        change = std::max(change, std::fabs(next - v[i]));
+        v[i] = next;
+      }
+    if (change < 1e-5f) break;
+  }
+  write_back();
+}
+
+}  // namespace
+
+Status ResampleOptions::Validate() const {
+  auto fail = [](const std::string& what) { return Status(Error{"resample options: " + what}); };
+  if (!(pitch_mm >= 0) || !std::isfinite(pitch_mm))
+    return fail("pitch_mm must be >= 0 (0 = the scan spacing), got " + std::to_string(pitch_mm));
+  if (!(max_edge_factor > 0) || !std::isfinite(max_edge_factor))
+    return fail("max_edge_factor must be > 0, got " + std::to_string(max_edge_factor));
+  if (!(max_hole_area_mm2 >= 0) || !std::isfinite(max_hole_area_mm2))
+    return fail("max_hole_area_mm2 must be >= 0, got " + std::to_string(max_hole_area_mm2));
+  if (max_texels_per_side < 1)
+    return fail("max_texels_per_side must be >= 1, got " + std::to_string(max_texels_per_side));
+  return Status::Ok();
+}
+
+Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options, ResampleStats* stats) {
+  const std::string src = scan.source.empty() ? "scan" : scan.source;
+  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
+  const Grid<Vec3f>& xyz = scan.xyz_mm;
+  const int sw = xyz.width, sh = xyz.height;
+  if (xyz.empty()) return Error{src + ": empty scan"};
+  if (canvas.mask_scan.width != sw || canvas.mask_scan.height != sh)
+    return Error{src + ": canvas mask is " + std::to_string(canvas.mask_scan.width) + "x" +
+                 std::to_string(canvas.mask_scan.height) + ", scan is " + std::to_string(sw) +
+                 "x" + std::to_string(sh)};
+  const Mat3d& rot = canvas.canvas_from_scan.rotation;
+  const Vec3d& trans = canvas.canvas_from_scan.translation;
+  if (!rot.allFinite() || !trans.allFinite() ||
+      !(rot.transpose() * rot).isApprox(Mat3d::Identity(), 1e-6) || !(rot.determinant() > 0))
+    return Error{src + ": canvas_from_scan is not a rigid transform"};
+  const Eigen::Vector2d extent = canvas.extent_mm;
+  if (!extent.allFinite() || extent.x() < 0 || extent.y() < 0)
+    return Error{src + ": invalid canvas extent"};
+
+  double tmark_ = NowS(), cmark_ = CpuS();
+  // ---- 1. Per scan row and chunk of kChunk + 1 vertices: the canvas-Y range (mm) of its canvas
+  // samples, so every chunk of quads can be listed in the output bands it reaches. 3D
+  // distances do not depend on the frame: the spacing is measured on the raw samples.
+  const int qw = std::max(0, sw - 1), qh = std::max(0, sh - 1);
+  const int chunks_per_row = std::max(1, (qw + kChunk - 1) / kChunk);
+  const float flt_max = std::numeric_limits<float>::max();
+  std::vector<float> row_ylo(static_cast<size_t>(chunks_per_row) * sh, flt_max);
+  std::vector<float> row_yhi(row_ylo.size(), kLowest);
+  const Eigen::Vector3d rot_y = rot.row(1).transpose();
+  const size_t count = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, sh), size_t{0},
+      [&](const tbb::blocked_range<int>& rows, size_t n) {
+        for (int y = rows.begin(); y < rows.end(); ++y) {
+          const Vec3f* in = xyz.Row(y);
+          const uint8_t* m = canvas.mask_scan.Row(y);
+          float* lo = row_ylo.data() + static_cast<size_t>(y) * chunks_per_row;
+          float* hi = row_yhi.data() + static_cast<size_t>(y) * chunks_per_row;
+          for (int x = 0; x < sw; ++x) {
+            if (!m[x] || !Usable(in[x])) continue;
+            ++n;
+            const float cy = static_cast<float>(rot_y.dot(in[x].cast<double>()) + trans.y());
+            // Vertex x belongs to chunk x / kChunk and, as its last vertex, to the one before.
+            const int c = std::min(x / kChunk, chunks_per_row - 1);
+            lo[c] = std::min(lo[c], cy);
+            hi[c] = std::max(hi[c], cy);
+            if (x % kChunk == 0 && c > 0) {
+              lo[c - 1] = std::min(lo[c - 1], cy);
+              hi[c - 1] = std::max(hi[c - 1], cy);
+            }
+          }
+        }
+        return n;
+      },
+      [](size_t a, size_t b) { return a + b; });
+  if (count < 3)
+    return Error{src + ": the canvas mask holds " + std::to_string(count) +
+                 " valid samples, too few to resample"};
+  TMARK("ranges")
+  double spacing = MedianSpacing(xyz, canvas.mask_scan, 1, 0, count);
+  if (!(spacing > 0)) spacing = MedianSpacing(xyz, canvas.mask_scan, 0, 1, count);
+  const double pitch = options.pitch_mm > 0 ? options.pitch_mm : spacing;
+  if (!(pitch > 0) || !std::isfinite(pitch))
+    return Error{src +
+                 ": no two adjacent canvas samples to measure the scan spacing; give pitch_mm"};
+  if (!(spacing > 0)) spacing = pitch;
+  const double gw = std::ceil(extent.x() / pitch), gh = std::ceil(extent.y() / pitch);
+  if (gw > options.max_texels_per_side || gh > options.max_texels_per_side)
+    return Error{src + ": a " + std::to_string(extent.x()) + " x " + std::to_string(extent.y()) +
+                 " mm canvas at pitch " + std::to_string(pitch) + " mm needs " +
+                 std::to_string(static_cast<long long>(gw)) + " x " +
+                 std::to_string(static_cast<long long>(gh)) + " texels, more than " +
+                 std::to_string(options.max_texels_per_side) + " per side; raise pitch_mm"};
+  const int w = std::max(1, static_cast<int>(gw)), h = std::max(1, static_cast<int>(gh));
+  // Edges are judged against the coarser of the output pitch and the scan spacing, so a fine
+  // output pitch does not discard every triangle.
+  const double edge_limit = options.max_edge_factor * std::max(pitch, spacing);
+  const float edge_limit2 = static_cast<float>(edge_limit * edge_limit);
+  TMARK("spacing")
+
+  // ---- 2. Chunks of quads listed in the output bands (kBandRows texel rows) they reach.
+  const int bands = (h + kBandRows - 1) / kBandRows;
+  const size_t chunk_count = static_cast<size_t>(chunks_per_row) * qh;
+  std::vector<std::vector<uint32_t>> band_chunks(static_cast<size_t>(bands));
+  std::vector<int> first_band(chunk_count, -1);  // the band that counts the chunk's triangles
+  for (int y = 0; y < qh; ++y)
+    for (int c = 0; c < chunks_per_row; ++c) {
+      const size_t i0 = static_cast<size_t>(y) * chunks_per_row + c, i1 = i0 + chunks_per_row;
+      const float ylo = std::min(row_ylo[i0], row_ylo[i1]);
+      const float yhi = std::max(row_yhi[i0], row_yhi[i1]);
+      if (!(ylo <= yhi)) continue;
+      // Texel rows: ty = h - Y / pitch - 0.5 (height_field.h), so Y's maximum gives the first.
+      const double j0 = std::max(0.0, std::ceil(h - yhi / pitch - 0.5 - 1e-3));
+      const double j1 = std::min(double(h - 1), std::floor(h - ylo / pitch - 0.5 + 1e-3));
+      if (j0 > j1) continue;
+      const size_t ci = static_cast<size_t>(y) * chunks_per_row + c;
+      first_band[ci] = static_cast<int>(j0) / kBandRows;
+      for (int b = static_cast<int>(j0) / kBandRows; b <= static_cast<int>(j1) / kBandRows; ++b)
+        band_chunks[static_cast<size_t>(b)].push_back(static_cast<uint32_t>(ci));
+    }
+  std::vector<float>().swap(row_ylo);
+  std::vector<float>().swap(row_yhi);
+  TMARK("buckets")
+
+  // ---- 3. Per band: transform the chunk's two vertex rows to texel coordinates, choose the
+  // quads' triangles, draw them into the band's rows.
+  HeightField field;
+  field.pitch_mm = pitch;
+  field.height_mm = Grid<float>(w, h, kLowest);
+  field.state = Grid<TexelState>(w, h, TexelState::kOutside);
+  float* out = field.height_mm.data.data();
+  // texel = (R p + t) scaled: x = X / pitch - 0.5, y = h - Y / pitch - 0.5; in float about a
+  // reference sample so the products stay small.
+  TexelTransform tf;
+  {
+    Mat3d to_texel = rot;
+    to_texel.row(0) /= pitch;
+    to_texel.row(1) /= -pitch;
+    const Vec3d offset(trans.x() / pitch - 0.5, h - trans.y() / pitch - 0.5, trans.z());
+    Vec3d ref = Vec3d::Zero();
+    for (size_t i = xyz.size() / 2, k = 0; k < xyz.size(); ++k) {
+      const size_t j = (i + k) % xyz.size();
+      if (canvas.mask_scan.data[j] && Usable(xyz.data[j])) {
+        ref = xyz.data[j].cast<double>();
+        break;
+      }
+    }
+    tf.ref = ref.cast<float>();
+    tf.m = to_texel.cast<float>();
+    tf.t = (to_texel * tf.ref.cast<double>() + offset).cast<float>();
+  }
+  const float pitch2 = static_cast<float>(pitch * pitch);
+  auto dist2 = [pitch2](const TexelPoint& p, const TexelPoint& q) {
+    const float dx = p.x - q.x, dy = p.y - q.y, dh = p.h - q.h;
+    return (dx * dx + dy * dy) * pitch2 + dh * dh;
+  };
+  const Counts counts = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, bands, 1), Counts{},
+      [&](const tbb::blocked_range<int>& br, Counts cnt) {
+        TexelPoint r0[kChunk + 1], r1[kChunk + 1];
+        for (int b = br.begin(); b < br.end(); ++b) {
+          const int row0 = b * kBandRows, row1 = std::min(h, row0 + kBandRows) - 1;
+          for (uint32_t ci : band_chunks[static_cast<size_t>(b)]) {
+            const int y = static_cast<int>(ci / chunks_per_row);
+            const int x0 = static_cast<int>(ci % chunks_per_row) * kChunk;
+            const int x1 = std::min(qw, x0 + kChunk);  // quads x0 .. x1 - 1
+            const bool count_here = first_band[ci] == b;
+            for (int r = 0; r < 2; ++r)
+              TexelRow(xyz.Row(y + r) + x0, canvas.mask_scan.Row(y + r) + x0, x1 - x0 + 1, tf,
+                       r == 0 ? r0 : r1);
+            for (int x = x0; x < x1; ++x) {
+              const TexelPoint &A = r0[x - x0], &B = r0[x - x0 + 1], &C = r1[x - x0],
+                               &D = r1[x - x0 + 1];
+              const int va = A.ok(), vb = B.ok(), vc = C.ok(), vd = D.ok();
+              const int nvalid = va + vb + vc + vd;
+              if (nvalid < 3) continue;
+              uint8_t cand = 0;
+              if (nvalid == 4)
+                cand = dist2(A, D) <= dist2(B, C) ? (kABD | kADC) : (kABC | kBDC);
+              else
+                cand = !va ? kBDC : !vb ? kADC : !vc ? kABD : kABC;
+              auto short_edge = [&](const TexelPoint& p, const TexelPoint& q) {
+                return dist2(p, q) <= edge_limit2;
+              };
+              uint8_t keep = 0;
+              if ((cand & kABD) && short_edge(A, B) && short_edge(B, D) && short_edge(A, D))
+                keep |= kABD;
+              if ((cand & kADC) && short_edge(A, D) && short_edge(D, C) && short_edge(A, C))
+                keep |= kADC;
+              if ((cand & kABC) && short_edge(A, B) && short_edge(B, C) && short_edge(A, C))
+                keep |= kABC;
+              if ((cand & kBDC) && short_edge(B, D) && short_edge(D, C) && short_edge(B, C))
+                keep |= kBDC;
+              if (count_here) {
+                const int ncand = __builtin_popcount(cand), nkeep = __builtin_popcount(keep);
+                cnt.drawn += nkeep;
+                cnt.skipped += ncand - nkeep;
+              }
+              if (keep & kABD) DrawTriangle(A, B, D, w, row0, row1, out);
+              if (keep & kADC) DrawTriangle(A, D, C, w, row0, row1, out);
+              if (keep & kABC) DrawTriangle(A, B, C, w, row0, row1, out);
+              if (keep & kBDC) DrawTriangle(B, D, C, w, row0, row1, out);
+            }
+          }
+        }
+        return cnt;
+      },
+      [](Counts a, const Counts& b) {
+        a.drawn += b.drawn;
+        a.skipped += b.skipped;
+        return a;
+      });
+  TMARK("raster")
+
+  // ---- 4. Outline and holes.
+  cv::Mat height_mat(h, w, CV_32F, out);
+  cv::Mat covered;
+  cv::compare(height_mat, kLowest, covered, cv::CMP_GT);  // 255 / 0
+  const int close_r =
+      std::max(kMinCloseRadiusTx, static_cast<int>(std::ceil(2.0 * spacing / pitch)));
+  TMARK("covered")
+  cv::Mat closed;
+  cv::morphologyEx(covered, closed, cv::MORPH_CLOSE,
+                   cv::getStructuringElement(cv::MORPH_RECT,
+                                             cv::Size(2 * close_r + 1, 2 * close_r + 1)));
+  TMARK("close")
+  cv::Mat inside;
+  cv::bitwise_or(closed, EnclosedIslands(closed), inside);
+  closed.release();
+  TMARK("inside")
+  cv::Mat holes;
+  cv::bitwise_and(inside, ~covered, holes);
+  cv::Mat labels, comp_stats, centroids;
+  const int ncomp = cv::connectedComponentsWithStats(holes, labels, comp_stats, centroids, 8,
+                                                     CV_32S);
+  TMARK("ccstats")
+  holes.release();
+  const double texel_area = pitch * pitch;
+  std::vector<uint8_t> comp_filled(static_cast<size_t>(std::max(ncomp, 1)), 0);
+  size_t holes_filled = 0, holes_unfilled = 0;
+  for (int k = 1; k < ncomp; ++k) {
+    const double area_mm2 = comp_stats.at<int>(k, cv::CC_STAT_AREA) * texel_area;
+    comp_filled[static_cast<size_t>(k)] = area_mm2 <= options.max_hole_area_mm2;
+    (comp_filled[static_cast<size_t>(k)] ? holes_filled : holes_unfilled)++;
+  }
+  TMARK("holes classify")
+  tbb::enumerable_thread_specific<FillScratch> scratch;
+  tbb::parallel_for(tbb::blocked_range<int>(1, std::max(ncomp, 1), 64),
+                    [&](const tbb::blocked_range<int>& r) {
+                      FillScratch& s = scratch.local();
+                      for (int k = r.begin(); k < r.end(); ++k) {
+                        cv::Rect rect(comp_stats.at<int>(k, cv::CC_STAT_LEFT) - 1,
+                                      comp_stats.at<int>(k, cv::CC_STAT_TOP) - 1,
+                                      comp_stats.at<int>(k, cv::CC_STAT_WIDTH) + 2,
+                                      comp_stats.at<int>(k, cv::CC_STAT_HEIGHT) + 2);
+                        rect &= cv::Rect(0, 0, w, h);
+                        const int iters = comp_filled[static_cast<size_t>(k)]
+                                              ? std::min(kMaxRelaxIterations,
+                                                         4 * std::max(rect.width, rect.height))
+                                              : kUnfilledRelaxIterations;
+                        FillHole(rect, k, labels, covered, out, w, iters, s);
+                      }
+                    });
+
+  TMARK("fill")
+  // ---- 5. States; outside texels at height 0; never NaN.
+  struct StateCounts {
+    size_t measured = 0, filled = 0, unfilled = 0, outside = 0;
+  };
+  const StateCounts sc = tbb::parallel_reduce(
+      tbb::blocked_range<int>(0, h), StateCounts{},
+      [&](const tbb::blocked_range<int>& rows, StateCounts c) {
+        for (int y = rows.begin(); y < rows.end(); ++y) {
+          const uint8_t* cov = covered.ptr<uint8_t>(y);
+          const uint8_t* ins = inside.ptr<uint8_t>(y);
+          const int* lab = labels.ptr<int>(y);
+          float* hrow = field.height_mm.Row(y);
+          TexelState* st = field.state.Row(y);
+          for (int x = 0; x < w; ++x) {
+            if (cov[x]) {
+              st[x] = TexelState::kMeasured;
+              ++c.measured;
+            } else if (ins[x] && lab[x] > 0) {
+              const bool small = comp_filled[static_cast<size_t>(lab[x])] != 0;
+              st[x] = small ? TexelState::kFilled : TexelState::kUnfilled;
+              ++(small ? c.filled : c.unfilled);
+            } else {
+              st[x] = TexelState::kOutside;
+              hrow[x] = 0;
+              ++c.outside;
+            }
+            if (!std::isfinite(hrow[x])) hrow[x] = 0;  // defensive: inputs were finite
+          }
+        }
+        return c;
+      },
+      [](StateCounts a, const StateCounts& b) {
+        a.measured += b.measured;
+        a.filled += b.filled;
+        a.unfilled += b.unfilled;
+        a.outside += b.outside;
+        return a;
+      });
+  TMARK("states")
+  if (stats) {
+    stats->texels = static_cast<size_t>(w) * h;
+    stats->measured = sc.measured;
+    stats->filled = sc.filled;
+    stats->unfilled = sc.unfilled;
+    stats->outside = sc.outside;
+    stats->holes_filled = holes_filled;
+    stats->holes_unfilled = holes_unfilled;
+    stats->triangles_drawn = counts.drawn;
+    stats->triangles_skipped = counts.skipped;
+  }
+  return field;
+}
+
+}  // namespace digitize

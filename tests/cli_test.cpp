@@ -1,0 +1,157 @@
+// The `digitize` command line as a user meets it: help, exit codes, error messages that name the
+// file, outputs complete or absent, never partial.
+#include <gtest/gtest.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Output {
+  int exit_code = -1;
+  std::string text;  // stdout + stderr
+};
+
+Output RunCli(const std::string& args) {
+  static int counter = 0;
+  const fs::path log = fs::temp_directory_path() / ("digitize_cli_test_" + std::to_string(::getpid()) + "_" +
+                                                    std::to_string(counter++) + ".log");
+  const std::string command = std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  Output out;
+  out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(log);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  out.text = ss.str();
+  fs::remove(log);
+  return out;
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("digitize_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+TEST_F(CliTest, HelpForEveryCommand) {
+  Output top = RunCli("--help");
+  EXPECT_EQ(top.exit_code, 0);
+  for (const char* cmd : {"synth", "preprocess", "demo"}) {
+    EXPECT_NE(top.text.find(cmd), std::string::npos) << cmd;
+    Output sub = RunCli(std::string(cmd) + " --help");
+    EXPECT_EQ(sub.exit_code, 0) << cmd;
+    EXPECT_NE(sub.text.find("--"), std::string::npos) << cmd;
+  }
+  // Thresholds are documented with their units.
+  Output pre = RunCli("preprocess --help");
+  EXPECT_NE(pre.text.find("--stop-gradient-mm"), std::string::npos);
+  EXPECT_NE(pre.text.find("--delta0"), std::string::npos);
+  EXPECT_NE(pre.text.find("--cell-px"), std::string::npos);
+}
+
+TEST_F(CliTest, NoCommandIsAUsageError) { EXPECT_NE(RunCli("").exit_code, 0); }
+
+TEST_F(CliTest, MissingScanNamesTheFile) {
+  Output out = RunCli("preprocess " + Path("nope.exr") + " --out " + Path("out"));
+  EXPECT_NE(out.exit_code, 0);
+  EXPECT_NE(out.text.find("nope.exr"), std::string::npos) << out.text;
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+TEST_F(CliTest, CorruptScanNamesTheFileAndWritesNothing) {
+  std::ofstream(Path("broken.exr")) << "this is not an OpenEXR file at all";
+  Output out = RunCli("preprocess " + Path("broken.exr") + " --out " + Path("out"));
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("broken.exr"), std::string::npos) << out.text;
+  EXPECT_FALSE(fs::exists(Path("out")));
+  for (const auto& entry : fs::directory_iterator(dir_))
+    EXPECT_EQ(entry.path().filename().string().find(".partial"), std::string::npos) << entry.path();
+}
+
+TEST_F(CliTest, BadOptionValueNamesTheOption) {
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  Output out = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") + " --cell-px 0");
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("cell_px"), std::string::npos) << out.text;
+  EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+TEST_F(CliTest, SynthThenPreprocessWritesCompleteOutputs) {
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 256 --seed 3");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  for (const char* f : {"scan.exr", "truth_height.exr", "truth_normals.exr", "truth.json", "truth_mask_scan.png"})
+    EXPECT_TRUE(fs::exists(Path(std::string("s/") + f))) << f;
+
+  Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c"));
+  ASSERT_EQ(pre.exit_code, 0) << pre.text;
+  for (const char* step : {"sanitize", "canvas", "resample", "relief", "normals"})
+    EXPECT_NE(pre.text.find(step), std::string::npos) << "one line per step: " << step;
+  for (const char* f : {"height.exr", "normals.exr", "mask.png", "boxes.json", "transform.json", "report.json"})
+    EXPECT_TRUE(fs::exists(Path(std::string("c/") + f))) << f;
+
+  // The height map is a finite float image with the pitch in its header.
+  auto in = OIIO::ImageInput::open(Path("c/height.exr"));
+  ASSERT_TRUE(in);
+  const OIIO::ImageSpec& spec = in->spec();
+  EXPECT_EQ(spec.nchannels, 1);
+  const std::string pitch = spec.get_string_attribute("digitize:pitch_mm");
+  ASSERT_FALSE(pitch.empty()) << "the pitch travels with the height map";
+  EXPECT_GT(std::stod(pitch), 0.0);
+  std::vector<float> pixels(static_cast<size_t>(spec.width) * spec.height);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, pixels.data()));
+  size_t nonzero = 0;
+  for (float v : pixels) {
+    ASSERT_TRUE(std::isfinite(v));
+    nonzero += v != 0.0f;
+  }
+  EXPECT_GT(nonzero, pixels.size() / 4) << "the canvas has relief";
+
+  // A failing re-run leaves the previous complete output in place.
+  std::ofstream(Path("broken.exr")) << "garbage";
+  Output again = RunCli("preprocess " + Path("broken.exr") + " --out " + Path("c"));
+  EXPECT_EQ(again.exit_code, 1);
+  EXPECT_TRUE(fs::exists(Path("c/height.exr")));
+  EXPECT_TRUE(fs::exists(Path("c/report.json")));
+}
+
+TEST_F(CliTest, OutputPathThatIsAFileIsRefused) {
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  std::ofstream(Path("afile")) << "keep me";
+  Output out = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("afile"));
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("afile"), std::string::npos) << out.text;
+  std::ifstream in(Path("afile"));
+  std::string content;
+  std::getline(in, content);
+  EXPECT_EQ(content, "keep me");
+}
+
+TEST_F(CliTest, DemoPrintsAccuracyAndWritesOutputs) {
+  Output out = RunCli("demo --out " + Path("demo") + " --resolution 256 --scan-px 384");
+  ASSERT_EQ(out.exit_code, 0) << out.text;
+  EXPECT_NE(out.text.find("IoU"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("RMSE"), std::string::npos) << out.text;
+  EXPECT_TRUE(fs::exists(Path("demo/canvas/height.exr")));
+  EXPECT_TRUE(fs::exists(Path("demo/scan/scan.exr")));
+}
+
+}  // namespace
