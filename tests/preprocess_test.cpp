@@ -21,7 +21,7 @@ constexpr double kRmseNoiseFactor = 2.0;   // issue target: RMSE <= 2 sigma (int
                                            // samples averages noise down, resampling adds a little)
 constexpr double kMaxNormalsMedianDeg = 0.5;  // issue target on a noise-free scan
 
-struct Run {
+struct PipelineRun {
   synth::Painting painting;
   synth::SyntheticScan scan;
   Result<PreprocessResult> result = Error{"not run"};
@@ -34,10 +34,10 @@ int MatchedResolution(const synth::ScanSimOptions& scan) {
   return std::max(64, static_cast<int>(std::min(scan.width_px, scan.height_px) * 0.6));
 }
 
-Run RunPipeline(synth::PaintingOptions painting_options, const synth::FrameOptions& frame,
+PipelineRun RunPipeline(synth::PaintingOptions painting_options, const synth::FrameOptions& frame,
                 const synth::ScanSimOptions& scan_options,
                 const PreprocessOptions& options = PreprocessOptions{}) {
-  Run run;
+  PipelineRun run;
   if (painting_options.resolution_px == 0) painting_options.resolution_px = MatchedResolution(scan_options);
   run.painting = synth::MakePainting(painting_options);
   const synth::Scene scene(run.painting, frame);
@@ -67,7 +67,7 @@ synth::PaintingOptions DefaultPainting() {
 TEST(Preprocess, DefaultSyntheticScanMeetsAccuracyTargets) {
   synth::ScanSimOptions scan;  // defaults: noise, dropouts, blob holes, outliers, tilt, roll, offset
   scan.width_px = scan.height_px = 768;
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   const auto& a = run.accuracy;
@@ -91,7 +91,7 @@ TEST(Preprocess, NoiseFreeScanGivesAccurateNormals) {
   scan.outliers = 0;
   scan.dropout = 0;
   scan.hole_blobs = 0;
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_LT(run.accuracy.normals_median_deg, kMaxNormalsMedianDeg);
@@ -103,7 +103,7 @@ TEST(Preprocess, PinholeScannerAndSeveralExposures) {
   synth::ScanSimOptions scan;
   scan.model = synth::ScannerModel::kPinhole;
   scan.exposures = 3;
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_EQ(run.result->merge.exposures, 3);
@@ -120,7 +120,7 @@ TEST(PreprocessStress, FlatCanvasHasNoBoxesAndNoError) {
   synth::ScanSimOptions scan;
   scan.noise_mm = 0;
   scan.outliers = 0;
-  const Run run = RunPipeline(p, synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(p, synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_TRUE(run.result->relief.boxes.empty());
@@ -132,7 +132,7 @@ TEST(PreprocessStress, NoFrameCanvasFillsTheScan) {
   frame.enabled = false;
   synth::ScanSimOptions scan;
   scan.field_margin = -0.1;  // the field of view lies inside the canvas
-  const Run run = RunPipeline(DefaultPainting(), frame, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), frame, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou);
@@ -143,7 +143,7 @@ TEST(PreprocessStress, FortyFiveDegreeTilt) {
   synth::ScanSimOptions scan;
   scan.tilt_deg = 45;
   scan.width_px = scan.height_px = 768;
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_LE(run.accuracy.normal_error_deg, kMaxTiltErrorDeg);
@@ -156,7 +156,7 @@ TEST(PreprocessStress, FortyFiveDegreeTilt) {
 TEST(PreprocessStress, ThirtyPercentHoles) {
   synth::ScanSimOptions scan;
   scan.dropout = 0.30;
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_LE(run.accuracy.normal_error_deg, kMaxTiltErrorDeg);
@@ -167,7 +167,7 @@ TEST(PreprocessStress, ThirtyPercentHoles) {
 TEST(PreprocessStress, HeavyNoise) {
   synth::ScanSimOptions scan;
   scan.noise_mm = 0.2;  // 10x the default: as large as the brush strokes
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
   EXPECT_LE(run.accuracy.normal_error_deg, 0.1) << "10x noise: a looser plane tolerance";
@@ -178,7 +178,7 @@ TEST(PreprocessStress, HeavyNoise) {
 TEST(PreprocessStress, OffCentreCanvasGivesClearErrorOrCanvas) {
   synth::ScanSimOptions scan;
   scan.offset_mm = Vec3d(180, 0, 0);  // the scan centre lands on the frame or beyond
-  const Run run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   if (run.result.ok()) {
     ExpectAllFinite(*run.result);
     EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou) << "if it finds a canvas, it is the canvas";

@@ -47,7 +47,7 @@ Grid<uint8_t> ExpectedValid(const HeightField& f, const ReliefOptions& o, double
   const double delta0 = o.delta0_fraction * H;
   *delta0_out = delta0;
   for (size_t i = 0; i < mv.size(); ++i)
-    mv.data[i] = HasHeight(f.state.data[i]) && f.height_mm.data[i] > delta0 - o.noise_margin_mm;
+    mv.data[i] = HasHeight(f.state.data[i]) && f.height_mm.data[i] > delta0 - std::min(o.noise_margin_mm, 0.5 * delta0);
   Grid<int> label(f.width(), f.height(), 0);
   int next = 0;
   for (int y = 0; y < f.height(); ++y)
@@ -431,10 +431,27 @@ TEST(Relief, NoiseMarginLowersTheThresholdOnly) {
   EXPECT_EQ(r.texels_above, 2u);
   EXPECT_EQ(r.valid(10, 10), 1);
   CheckAgainstBruteForce(f, Options(4, 0.0, 0.3, 0.02), r);
-  // A margin above delta0 pulls the threshold under the canvas plane: the whole canvas is relief.
+  // A margin above delta0 is capped at delta0 / 2 (threshold 1.5 mm here): a noisy scan must not
+  // turn the whole canvas into relief.
   r = ClassifyRelief(f, Options(4, 0.0, 0.3, 3.5));
-  EXPECT_EQ(r.texels_above, 256u);
-  EXPECT_EQ(r.boxes.size(), 16u);
+  EXPECT_EQ(r.texels_above, 2u);
+  EXPECT_EQ(r.boxes.size(), 2u);
+}
+
+TEST(Relief, FlatCanvasBelowTheReliefFloorHasNoBoxes) {
+  HeightField f = MakeField(16, 16, 0.25);
+  f.height_mm(5, 5) = 0.015f;  // rounding dust, below the default 0.02 mm floor
+  ReliefResult r = ClassifyRelief(f, ReliefOptions{});
+  EXPECT_TRUE(r.boxes.empty());
+  EXPECT_EQ(r.texels_above, 0u);
+  ReliefOptions no_floor;
+  no_floor.min_relief_mm = 0.0;
+  no_floor.min_component_area_mm2 = 0.0;  // one texel is 0.0625 mm^2: not a speck here
+  r = ClassifyRelief(f, no_floor);  // without a floor the same dust becomes a box
+  EXPECT_EQ(r.boxes.size(), 1u);
+  ReliefOptions bad;
+  bad.min_relief_mm = -1;
+  EXPECT_NE(bad.Validate().message().find("min_relief_mm"), std::string::npos);
 }
 
 // The generator's truth height field (weave, strokes, impasto, cracks): every texel above delta0

@@ -23,14 +23,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <cstring>
-#include <chrono>
-#include <ctime>
-static double NowS() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-static double CpuS() { timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + t.tv_nsec * 1e-9; }
-#define TMARK(name) if (getenv("CTIME")) { double t_ = NowS(), c_ = CpuS(); fprintf(stderr, "  %-14s wall %6.1f ms cpu %6.1f ms\n", name, (t_ - tmark_) * 1e3, (c_ - cmark_) * 1e3); tmark_ = t_; cmark_ = c_; }
 #include <limits>
 #include <string>
 #include <vector>
@@ -51,6 +44,8 @@ constexpr float kMaxAbsCoordinateMm = 1e6f;
 constexpr size_t kMinValidSamples = 100;
 // The growth can include the foot of an oblique wall (one pixel); peel this much before refining.
 constexpr int kPeelPx = 2;
+// The refinement stops when nothing changes, or after this many steps.
+constexpr int kMaxRefineSteps = 100;
 // Wall test: a barrier neighbour (step or steep slope, see GrowableMask) higher or lower by more
 // than kWallRise sample spacings is part of a frame wall; the candidate may then be the wall's foot and must continue the canvas within
 // the noise (kTightSigmas second-difference sigmas, plus kTightFloorMm of relief curvature).
@@ -66,11 +61,11 @@ constexpr double kLineFloorShare = 0.02;
 // kLineRiseSigmas height-difference sigmas: a barrier run along a frame step on flat canvas is
 // collinear too, but flat.
 constexpr double kLineRiseSigmas = 3.0;
-constexpr double kLineSlope = 1.0;
+constexpr double kLineSlope = 0.3;
 // Over a missing sample the extrapolation 3 p(q+2d) - 2 p(q+3d) has sqrt(14 / 6) times the noise.
 constexpr double kFarLineFactor = 1.53;
 constexpr double kTightFloorMm = 0.06;
-constexpr double kRefineCurvatureShare = 0.5;
+constexpr double kRefineCurvatureShare = 0.25;
 constexpr double kRefineNoiseSigmas = 10.0;
 // Robust refit: iterations, and the lower trim (outliers below the canvas) in multiples of the
 // upper one (relief above).
@@ -82,6 +77,10 @@ constexpr size_t kRoughSamples = 1000000;
 constexpr size_t kFitSamples = 1000000;
 // Samples for medians (MAD, spacings, noise): a regular subsample of about this many pixels.
 constexpr size_t kStatSamples = 250000;
+constexpr size_t kNoiseSamples = 100000;   // noise: a MAD to better than 1 %
+constexpr size_t kSpacingSamples = 50000;  // sample spacing: a median
+// A grown region filling less of its convex hull than this is not a canvas (a frame ring).
+constexpr double kMinSolidity = 0.6;
 // In-plane eigenvalues closer than this (relative) leave the axes undefined: use scan +X.
 constexpr double kIsotropicEigen = 0.05;
 // Points farther than this from the plane are not canvas (frames rise 15+ mm): they do not
@@ -96,6 +95,16 @@ inline bool Usable(const Vec3f& p) {
 }
 
 std::string SourceName(const Scan& scan) { return scan.source.empty() ? "scan" : scan.source; }
+
+// "(x, y)", appended piecewise (GCC 12 warns falsely about "(" + std::string at -O3).
+std::string PointText(int x, int y) {
+  std::string text = "(";
+  text += std::to_string(x);
+  text += ", ";
+  text += std::to_string(y);
+  text += ")";
+  return text;
+}
 
 // First and second moments about a fixed shift (keeps the covariance well conditioned).
 struct Moments {
@@ -150,8 +159,9 @@ PlaneFit PlaneFromMoments(const Moments& m, const Vec3d& shift) {
 template <class Pred>
 PlaneFit FitGrid(const Grid<Vec3f>& xyz, const Vec3d& shift, int stride, const Pred& pred) {
   const int rows_sampled = (xyz.height + stride - 1) / stride;
-  const Moments m = tbb::parallel_reduce(
-      tbb::blocked_range<int>(0, rows_sampled), Moments{},
+  // Deterministic reduction (fixed split): the same scan gives the same plane, bit for bit.
+  const Moments m = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<int>(0, rows_sampled, 16), Moments{},
       [&](const tbb::blocked_range<int>& rows, Moments acc) {
         for (int r = rows.begin(); r < rows.end(); ++r) {
           const int y = r * stride;
@@ -178,7 +188,7 @@ template <class Pred>
 PlaneFit FitPoints(const std::vector<Vec3f>& points, const Vec3d& shift, const Pred& pred) {
   const Eigen::Vector3f shift_f = shift.cast<float>();
   const Vec3d shift_used = shift_f.cast<double>();
-  const Moments m = tbb::parallel_reduce(
+  const Moments m = tbb::parallel_deterministic_reduce(
       tbb::blocked_range<size_t>(0, points.size(), 1 << 14), Moments{},
       [&](const tbb::blocked_range<size_t>& r, Moments acc) {
         for (size_t i = r.begin(); i < r.end(); ++i) {
@@ -216,8 +226,6 @@ double Mad(const std::vector<double>& v, double center) {
   return Median(d);
 }
 
-// Stride so that a regular subsample of `count` pixels has about kStatSamples elements.
-int StatStride(size_t count) { return SampleStride(count, kStatSamples); }
 
 // Heights and in-plane coordinates of a plane frame (float: used per pixel in hot loops).
 struct LocalFrame {
@@ -368,12 +376,46 @@ void GrowableMask(const Grid<Vec3f>& xyz, const LocalFrame& frame, double stop_g
 // Pixels of `mask` (0/255) reachable from the image border through non-mask pixels are the
 // outside; the others (enclosed islands) are returned as 255.
 cv::Mat EnclosedIslands(const cv::Mat& mask) {
-  cv::Mat padded;
-  cv::Mat inverse;
-  cv::bitwise_not(mask, inverse);
+  cv::Mat islands = cv::Mat::zeros(mask.size(), CV_8U);
+  // Islands lie inside the mask's bounding rectangle: flood only that part.
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.empty()) return islands;
+  cv::Mat inverse, padded;
+  cv::bitwise_not(mask(box), inverse);
   cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
   cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
-  return padded(cv::Rect(1, 1, mask.cols, mask.rows)).clone();
+  padded(cv::Rect(1, 1, box.width, box.height)).copyTo(islands(box));
+  return islands;
+}
+
+// Pixel count of a region over the area of its convex hull (the hull of each row's extreme
+// pixels, rows scanned in parallel).
+double Solidity(const cv::Mat& region, size_t count) {
+  const int w = region.cols, h = region.rows;
+  std::vector<int> first(static_cast<size_t>(h), -1), last(static_cast<size_t>(h), -1);
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) {
+      const uint8_t* row = region.ptr<uint8_t>(y);
+      int a = 0, b = w - 1;
+      while (a < w && !row[a]) ++a;
+      if (a == w) continue;
+      while (!row[b]) --b;
+      first[static_cast<size_t>(y)] = a;
+      last[static_cast<size_t>(y)] = b;
+    }
+  });
+  std::vector<cv::Point2f> extremes;
+  for (int y = 0; y < h; ++y) {
+    if (first[static_cast<size_t>(y)] < 0) continue;
+    // Pixel squares, not centres: a one-pixel-wide region has a hull of its own area.
+    const float a = first[static_cast<size_t>(y)] - 0.5f, b = last[static_cast<size_t>(y)] + 0.5f;
+    extremes.insert(extremes.end(), {{a, y - 0.5f}, {a, y + 0.5f}, {b, y - 0.5f}, {b, y + 0.5f}});
+  }
+  if (extremes.size() < 3) return 1;
+  std::vector<cv::Point2f> hull;
+  cv::convexHull(extremes, hull);
+  const double area = cv::contourArea(hull);
+  return area > 0 ? static_cast<double>(count) / area : 1;
 }
 
 // Packed indices y * width + x of the nonzero pixels of a continuous 8-bit image, in raster
@@ -431,7 +473,7 @@ bool FindSeed(const cv::Mat& growable, int cx, int cy, int* sx, int* sy) {
 // Median in-plane spacing between 4-neighbours (dx, dy) that are both usable and in `mask`.
 double MedianSpacing(const Grid<Vec3f>& xyz, const cv::Mat& mask, const LocalFrame& frame, int dx,
                      int dy, size_t mask_count) {
-  const int stride = StatStride(mask_count);
+  const int stride = SampleStride(mask_count, kSpacingSamples);
   std::vector<double> d;
   for (int y = 0; y + dy < xyz.height; y += stride) {
     const uint8_t* m0 = mask.ptr<uint8_t>(y);
@@ -480,7 +522,7 @@ PlaneFit FitPlanePca(const std::vector<Vec3d>& points) {
       shift = p;
       break;
     }
-  const Moments m = tbb::parallel_reduce(
+  const Moments m = tbb::parallel_deterministic_reduce(
       tbb::blocked_range<size_t>(0, points.size(), 4096), Moments{},
       [&](const tbb::blocked_range<size_t>& r, Moments acc) {
         for (size_t i = r.begin(); i < r.end(); ++i)
@@ -505,7 +547,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   if (xyz.empty() || xyz.data.size() != static_cast<size_t>(w) * static_cast<size_t>(h))
     return Error{src + ": empty scan (" + std::to_string(w) + "x" + std::to_string(h) + ")"};
 
-  double tmark_ = NowS(), cmark_ = CpuS();
   // ---- 1. Rough plane of every usable sample.
   // Moments about the first usable sample at or after the centre keep the covariance well
   // conditioned; the rough plane needs only a regular subsample.
@@ -532,38 +573,34 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     return Error{src + ": the valid samples are (nearly) collinear; a " + std::to_string(w) +
                  "x" + std::to_string(h) + " scan does not span a canvas plane"};
 
-  TMARK("pca0")
   // ---- 2. Barrier mask.
   cv::Mat grow, valid;
   GrowableMask(xyz, LocalFrame(rough), options.stop_gradient_mm, options.stop_slope, grow, valid);
   const size_t valid_count = static_cast<size_t>(cv::countNonZero(valid));
 
-  TMARK("barrier")
   // ---- 3. Region growing from the seed, enclosed islands added back.
   const bool user_seed = options.seed_x >= 0;
   int cx = user_seed ? options.seed_x : w / 2, cy = user_seed ? options.seed_y : h / 2;
   if (user_seed && (cx >= w || cy >= h))
-    return Error{src + ": seed (" + std::to_string(cx) + ", " + std::to_string(cy) +
-                 ") lies outside the " + std::to_string(w) + "x" + std::to_string(h) + " scan"};
+    return Error{src + ": seed " + PointText(cx, cy) + " lies outside the " + std::to_string(w) +
+                 "x" + std::to_string(h) + " scan"};
   int sx = -1, sy = -1;
   if (!FindSeed(grow, cx, cy, &sx, &sy))
-    return Error{src + ": no valid sample with a low gradient near the seed (" +
-                 std::to_string(cx) + ", " + std::to_string(cy) +
-                 "); nothing to grow the canvas from"};
+    return Error{src + ": no valid sample with a low gradient near the seed " +
+                 PointText(cx, cy) + "; nothing to grow the canvas from"};
   const int grown = cv::floodFill(grow, cv::Point(sx, sy), cv::Scalar(2), nullptr, cv::Scalar(0),
-                                  cv::Scalar(0), 4);
+                                  cv::Scalar(0), 8);
   cv::Mat region;
   cv::compare(grow, 2, region, cv::CMP_EQ);  // 255 / 0
   const cv::Mat islands = EnclosedIslands(region);
   const size_t islands_px = static_cast<size_t>(cv::countNonZero(islands));
-  const std::string seed_text = "(" + std::to_string(sx) + ", " + std::to_string(sy) + ")";
+  const std::string seed_text = PointText(sx, sy);
   const std::string seed_hint =
       user_seed ? "" : "; the canvas may be off-centre: give a seed on the canvas (--seed X,Y)";
   if (islands_px > static_cast<size_t>(grown))
     return Error{src + ": the region grown from seed " + seed_text + " (" + std::to_string(grown) +
                  " px) encloses a larger area (" + std::to_string(islands_px) +
                  " px): the seed is on the frame or the wall, not on the canvas" + seed_hint};
-  TMARK("flood+islands")
   cv::Mat filled;
   cv::bitwise_or(region, islands, filled);
   region.release();
@@ -575,8 +612,15 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
                  std::to_string(options.min_canvas_fraction * 100) + " % of the " +
                  std::to_string(valid_count) + " valid samples (seed on the frame or a speck?)" +
                  seed_hint};
+  // A canvas seen by a scanner is convex (a rectangle, an oval; occlusion by the frame cuts it
+  // along straight lines). A region grown on the frame is a ring or a part of one: it fills a
+  // small share of its convex hull.
+  if (const double solidity = Solidity(filled, filled_px); solidity < kMinSolidity)
+    return Error{src + ": the region grown from seed " + seed_text + " is not convex (it fills " +
+                 std::to_string(static_cast<int>(solidity * 100)) +
+                 " % of its convex hull): the seed is on the frame or the wall, not on the canvas" +
+                 seed_hint};
 
-  TMARK("checks")
   // ---- 4. Robust plane on the eroded region.
   const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
   cv::Mat fit_mask;
@@ -587,7 +631,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   cv::bitwise_and(fit_mask, valid, fit_mask);  // valid is 0/1: nonzero where valid
   if (static_cast<size_t>(cv::countNonZero(fit_mask)) < kMinValidSamples)
     cv::bitwise_and(filled, valid, fit_mask);  // tiny canvas: fit on all of it
-  TMARK("erode+and")
   const size_t fit_mask_count = static_cast<size_t>(cv::countNonZero(fit_mask));
   // The fit samples, gathered once (a regular subsample of the eroded canvas).
   std::vector<Vec3f> fit_points;
@@ -610,11 +653,10 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     for (const auto& v : per_row) fit_points.insert(fit_points.end(), v.begin(), v.end());
   }
   PlaneFit plane = FitPoints(fit_points, rough.centroid, [](const Vec3f&) { return true; });
-  TMARK("fit1")
   if (plane.count < 3)
     return Error{src + ": too few canvas samples (" + std::to_string(plane.count) +
                  ") to fit the canvas plane"};
-  const int fit_stride = StatStride(fit_mask_count);
+  
   const size_t residual_step = std::max<size_t>(1, fit_points.size() / kStatSamples);
   for (int it = 0; it < kTrimIterations; ++it) {
     const Eigen::Vector3f c = plane.centroid.cast<float>(), n = plane.axes.col(2).cast<float>();
@@ -632,11 +674,9 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       const float d = n.dot(p - c);
       return d >= lo && d <= hi;
     });
-    TMARK("refit")
     if (next.count < 3 || !(next.eigenvalues(1) > 0)) break;
     plane = next;
   }
-  TMARK("robustfit")
   const LocalFrame frame(plane);
 
   // Noise: Immerkaer's mask [1 -2 1; -2 4 -2; 1 -2 1] (a product of second differences, blind to
@@ -644,9 +684,10 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   double noise_sigma = 0;
   {
     std::vector<double> resp;
-    for (int y = 1; y + 1 < h; y += fit_stride) {
+    const int noise_stride = SampleStride(fit_mask_count, kNoiseSamples);
+    for (int y = 1; y + 1 < h; y += noise_stride) {
       const uint8_t* m = fit_mask.ptr<uint8_t>(y);
-      for (int x = 1; x + 1 < w; x += fit_stride) {
+      for (int x = 1; x + 1 < w; x += noise_stride) {
         if (!m[x]) continue;
         static constexpr float k[3][3] = {{1, -2, 1}, {-2, 4, -2}, {1, -2, 1}};
         double acc = 0;
@@ -670,12 +711,10 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     }
   }
 
-  TMARK("noise")
   // ---- 5. Boundary: peel, then regrow with the strict test.
   cv::Mat core;
   cv::erode(filled, core, kernel, cv::Point(-1, -1), kPeelPx);
   if (cv::countNonZero(core) == 0) core = filled.clone();
-  if (getenv("CDBG2")) for (int yy = 98; yy < 112; ++yy) { for (int xx = 112; xx < 130; ++xx) fprintf(stderr, "%d%d ", filled.at<uint8_t>(yy, xx) ? 1 : 0, grow.at<uint8_t>(yy, xx)); fprintf(stderr, "\n"); }
   const double spacing_x = MedianSpacing(xyz, core, frame, 1, 0, fit_mask_count);
   const double spacing_y = MedianSpacing(xyz, core, frame, 0, 1, fit_mask_count);
   const double tol_loose = std::max(kRefineCurvatureShare * options.refine_step_mm,
@@ -698,15 +737,18 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   auto accept = [&](int qx, int qy) {
     const Vec3f& pq = xyz(qx, qy);
     const float hq = frame.H(pq);
-    // A barrier next to q (steep or a step: a frame wall), clearly higher or lower: q may be the
-    // wall's foot, so q must then continue the canvas within the noise.
+    // A barrier next to q (steep or a step: a frame wall) clearly higher or lower, or a missing
+    // sample: q may be a wall's foot, so q must then continue the canvas within the noise.
     bool wall_next = false;
     for (int d = 0; d < 4; ++d) {
       const int x1 = qx + kDx[d], y1 = qy + kDy[d];
       if (!inside(x1, y1)) continue;
       const double spacing = kDx[d] != 0 ? spacing_x : spacing_y;
       if (!usable_at(x1, y1)) {
-        // The next sample is missing: the same test one step further (q = 3 p(q+2d) - 2 p(q+3d)).
+        // A missing neighbour outside the region may be a wall the scanner saw too obliquely to
+        // measure (structured light drops grazing surfaces): q may be its foot.
+        wall_next = wall_next || !in[idx(x1, y1)];
+        // The same foot test one step further (q = 3 p(q+2d) - 2 p(q+3d)).
         const int x2 = x1 + kDx[d], y2 = y1 + kDy[d], x3 = x2 + kDx[d], y3 = y2 + kDy[d];
         if (!inside(x3, y3) || !usable_at(x2, y2) || !usable_at(x3, y3) ||
             grow.ptr<uint8_t>(y2)[x2] != 0 || grow.ptr<uint8_t>(y3)[x3] != 0)
@@ -738,8 +780,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       if ((pq - 2.0f * p2 + p3).norm() < tol_line) return false;
     }
     const double tol = wall_next ? tol_tight : tol_loose;
-    const bool dbg = getenv("CDBG") && qx == atoi(getenv("CDBG")) && qy == atoi(strchr(getenv("CDBG"), ',') + 1);
-    if (dbg) fprintf(stderr, "q %d,%d h %.4f wall_next %d tol %.4f\n", qx, qy, hq, wall_next, tol);
     // Every region neighbour must agree: small step, and q on the linear extrapolation of the
     // region through that neighbour.
     int agree = 0;
@@ -752,13 +792,11 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       double second = hq - hr;
       if (inside(r2x, r2y) && in[idx(r2x, r2y)] != 0 && usable_at(r2x, r2y))
         second = hq - 2.0 * hr + frame.H(xyz(r2x, r2y));
-      if (dbg) fprintf(stderr, "  d %d hr %.4f second %.4f in2 %d\n", d, hr, second, in[idx(r2x, r2y)]);
       if (!(std::fabs(second) < tol)) return false;
       ++agree;
     }
     return agree > 0;
   };
-  TMARK("core+spacing")
   // Initial frontier: pixels outside the core with a 4-neighbour inside.
   std::vector<int> frontier;  // packed y * w + x
   {
@@ -767,14 +805,17 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     cv::bitwise_xor(ring, mask, ring);
     frontier = NonZeroIndices(ring);
   }
-  TMARK("frontier0")
   std::vector<int> accepted, missing_edge;
-  size_t refined_total = 0;
-  for (int step = 0; step < kPeelPx + options.refine_px && !frontier.empty(); ++step) {
+  // The refinement may reach refine_px beyond the grown region; within that band it runs to
+  // convergence (paths around missing samples are longer than the distance).
+  cv::Mat band;
+  cv::dilate(filled, band, kernel, cv::Point(-1, -1), options.refine_px);
+  const uint8_t* in_band = band.data;
+  for (int step = 0; step < kMaxRefineSteps && !frontier.empty(); ++step) {
     accepted.clear();
     for (int q : frontier) {
       const int qx = q % w, qy = q / w;
-      if (in[idx(qx, qy)]) continue;
+      if (in[idx(qx, qy)] || !in_band[q]) continue;
       if (!usable_at(qx, qy)) {
         missing_edge.push_back(q);
         continue;
@@ -782,8 +823,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       if (accept(qx, qy)) accepted.push_back(q);
     }
     for (int q : accepted) in[static_cast<size_t>(q)] = 255;
-    if (getenv("CDBG")) for (int q : accepted) if (q % w == 121 && q / w < 110) fprintf(stderr, "step %d accepted %d,%d\n", step, q % w, q / w);
-    refined_total += accepted.size();
     frontier.clear();
     for (int q : accepted) {
       const int qx = q % w, qy = q / w;
@@ -793,7 +832,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       }
     }
   }
-  TMARK("refine")
   // Missing pixels on the boundary whose opposite neighbours are both canvas: the canvas as seen
   // by the scanner is convex along rows and columns, so they are canvas too.
   for (int pass = 0; pass < 2; ++pass) {
@@ -817,14 +855,17 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       }
     }
   }
-  TMARK("convex")
+  // Missing samples the grown region enclosed stay canvas (the truth behind a dropout is the
+  // surface around it); then everything the final mask encloses.
   cv::Mat final_mask = mask;
   {
+    cv::Mat enclosed_missing;
+    cv::bitwise_and(filled, 1 - valid, enclosed_missing);  // valid is 0 / 1
+    final_mask.setTo(255, enclosed_missing);
     const cv::Mat holes = EnclosedIslands(final_mask);
     cv::bitwise_or(final_mask, holes, final_mask);
   }
 
-  TMARK("final islands")
   // ---- 6. Canvas frame.
   const Vec3d n = plane.axes.col(2);
   Vec3d x_axis;
@@ -897,7 +938,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   Box box = box_of(true);
   if (box.count == 0) box = box_of(false);
   if (box.count == 0) return Error{src + ": the canvas mask holds no valid sample"};
-  TMARK("box+mask")
 
   result.canvas_from_scan.rotation = rot;
   result.canvas_from_scan.translation = -(rot * c0) - Vec3d(box.x0, box.y0, 0);
@@ -910,7 +950,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   result.plane_points = plane.count;
   result.seed_x = sx;
   result.seed_y = sy;
-  (void)refined_total;
   return result;
 }
 

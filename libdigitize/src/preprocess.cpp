@@ -1,5 +1,6 @@
 #include "digitize/preprocess.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -124,7 +125,13 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   t0 = Clock::now();
   ReportProgress(progress, "relief", 4.0 / kSteps);
   ReliefOptions relief_options = options.relief;
-  if (options.noise_margin_from_scan) relief_options.noise_margin_mm = 2.0 * c.noise_sigma_mm;
+  if (options.noise_margin_from_scan) {
+    // The max of N Gaussian samples reaches ~5 sigma for N ~ 10^6: below 8 sigma, the "relief" of
+    // a flat canvas is its noise. The margin is capped so it never swallows delta0 itself.
+    const double sigma = c.noise_sigma_mm;
+    relief_options.min_relief_mm = std::max(relief_options.min_relief_mm, 8.0 * sigma);
+    relief_options.noise_margin_mm = 2.0 * sigma;
+  }
   result.relief = ClassifyRelief(result.field, relief_options);
   const ReliefResult& r = result.relief;
   step("relief", t0,

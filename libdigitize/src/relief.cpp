@@ -53,6 +53,8 @@ Status ReliefOptions::Validate() const {
   if (cell_px < 1) return Error{"cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!(std::isfinite(noise_margin_mm) && noise_margin_mm >= 0.0))
     return Error{"noise_margin_mm must be a finite height >= 0 mm, got " + Str(noise_margin_mm)};
+  if (!(std::isfinite(min_relief_mm) && min_relief_mm >= 0.0))
+    return Error{"min_relief_mm must be a finite height >= 0 mm, got " + Str(min_relief_mm)};
   return Status::Ok();
 }
 
@@ -92,10 +94,14 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
       [](float a, float b) { return std::max(a, b); });
   if (max_h == kNone) return result;  // no texel with height
   result.max_height_mm = max_h;
-  if (!(max_h > 0.0f)) return result;  // flat or concave canvas: no relief above the plane
+  // Flat canvas: a highest point within the relief floor is noise or rounding, not relief; boxes
+  // built on it would make the viewer relief-map the whole canvas for nothing.
+  if (!(max_h > options.min_relief_mm)) return result;
 
   result.delta0_mm = options.delta0_fraction * max_h;
-  const double threshold = result.delta0_mm - options.noise_margin_mm;
+  // The margin never takes more than half of delta0: it widens Mv near the threshold, it must not
+  // turn the whole canvas into relief when the noise is large against the relief.
+  const double threshold = result.delta0_mm - std::min(options.noise_margin_mm, 0.5 * result.delta0_mm);
 
   // --- 2. Mv, and the highest texel (among texels with height) of every cell. Parallel over
   // cell rows so each band owns its cells' peaks.

@@ -20,13 +20,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-#include <chrono>
-#include <cstdio>
-#include <cstdlib>
-#include <ctime>
-static double NowS() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-static double CpuS() { timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + t.tv_nsec * 1e-9; }
-#define TMARK(name) if (getenv("CTIME")) { double t_ = NowS(), c_ = CpuS(); fprintf(stderr, "  R %-14s wall %6.1f ms cpu %6.1f ms\n", name, (t_ - tmark_) * 1e3, (c_ - cmark_) * 1e3); tmark_ = t_; cmark_ = c_; }
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -42,8 +35,8 @@ constexpr float kMaxAbsCoordinateMm = 1e6f;  // as canvas.cpp: beyond is sensor 
 constexpr int kChunk = 32;                   // quads per chunk of a scan row (rasteriser lists)
 constexpr int kBandRows = 32;                // output rows per rasteriser task
 constexpr float kBaryEps = 1e-5f;            // texel centres on a shared edge go to both sides
-constexpr size_t kStatSamples = 250000;      // subsample size for the median spacing
-constexpr int kMinCloseRadiusTx = 2;         // outline closing radius, texels (at least)
+constexpr size_t kStatSamples = 50000;       // subsample size for the median spacing
+constexpr size_t kMapSamples = 20000;        // samples fitting the pixel -> texel map
 constexpr int kMaxRelaxIterations = 200;     // membrane relaxation of a filled hole
 constexpr int kUnfilledRelaxIterations = 20; // large holes: continuity only
 constexpr float kLowest = std::numeric_limits<float>::lowest();
@@ -60,6 +53,7 @@ struct TexelPoint {
 
 // Triangles of a quad with corners A = (x, y), B = (x+1, y), C = (x, y+1), D = (x+1, y+1).
 enum : uint8_t { kABD = 1, kADC = 2, kABC = 4, kBDC = 8 };
+constexpr uint8_t kBits[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};  // popcount
 
 struct Counts {
   size_t drawn = 0, skipped = 0;
@@ -105,55 +99,97 @@ inline void TexelRow(const Vec3f* in, const uint8_t* mask, int n, const TexelTra
   }
 }
 
-// ceil / floor without a libm call; far-away values are clamped (the callers clamp to the grid).
-inline int CeilInt(float v) {
-  v = std::clamp(v, -1e9f, 1e9f);
-  const int i = static_cast<int>(v);
-  return i + (v > i);
-}
-inline int FloorInt(float v) {
-  v = std::clamp(v, -1e9f, 1e9f);
-  const int i = static_cast<int>(v);
-  return i - (v < i);
+// floor / ceil of v >= -2 by truncation (the callers clamp): no libm call, no branch.
+inline int FloorFrom(float v) { return static_cast<int>(v + 2.f) - 2; }
+inline int CeilFrom(float v) {
+  const int f = FloorFrom(v);
+  return f + (static_cast<float>(f) < v);
 }
 
-// Rasterises one triangle into rows [row0, row1] of `out` (width w), keeping the maximum. Float
-// edge functions relative to vertex a: the differences of nearby coordinates are exact.
-inline void DrawTriangle(const TexelPoint& a, const TexelPoint& b, const TexelPoint& c, int w,
-                         int row0, int row1, float* out) {
-  const float minx = std::min({a.x, b.x, c.x}), maxx = std::max({a.x, b.x, c.x});
-  const float miny = std::min({a.y, b.y, c.y}), maxy = std::max({a.y, b.y, c.y});
-  const int i0 = std::max(0, CeilInt(minx)), i1 = std::min(w - 1, FloorInt(maxx));
-  if (i0 > i1) return;
-  const int j0 = std::max(row0, CeilInt(miny)), j1 = std::min(row1, FloorInt(maxy));
-  if (j0 > j1) return;
-  const float e1x = b.x - a.x, e1y = b.y - a.y;
-  const float e2x = c.x - a.x, e2y = c.y - a.y;
-  const float area = e1x * e2y - e2x * e1y;
-  if (!(std::fabs(area) > 1e-12f)) return;
-  const float inv = 1.0f / area;
-  const float dh1 = b.h - a.h, dh2 = c.h - a.h;
-  for (int j = j0; j <= j1; ++j) {
-    const float py = static_cast<float>(j) - a.y;
-    float* row = out + static_cast<size_t>(j) * w;
-    for (int i = i0; i <= i1; ++i) {
-      const float px = static_cast<float>(i) - a.x;
-      const float wb = (px * e2y - e2x * py) * inv;
-      const float wc = (e1x * py - px * e1y) * inv;
-      if (wb < -kBaryEps || wc < -kBaryEps || wb + wc > 1.0f + kBaryEps) continue;
-      const float value = a.h + wb * dh1 + wc * dh2;
-      if (value > row[i]) row[i] = value;
+// Linear interpolation over one triangle at texel centres. Edge functions relative to vertex a
+// in float: differences of nearby coordinates are exact. At() gives kLowest outside.
+struct TriangleSetup {
+  float ax = 0, ay = 0, ah = 0, e1x = 0, e1y = 0, e2x = 0, e2y = 0, inv = 0, dh1 = 0, dh2 = 0;
+  TriangleSetup() = default;
+  TriangleSetup(const TexelPoint& a, const TexelPoint& b, const TexelPoint& c)
+      : ax(a.x), ay(a.y), ah(a.h), e1x(b.x - a.x), e1y(b.y - a.y), e2x(c.x - a.x), e2y(c.y - a.y),
+        dh1(b.h - a.h), dh2(c.h - a.h) {
+    const float area = e1x * e2y - e2x * e1y;
+    inv = std::fabs(area) > 1e-12f ? 1.0f / area : 0.f;  // degenerate: never inside
+  }
+  float At(int i, int j) const {
+    const float px = static_cast<float>(i) - ax, py = static_cast<float>(j) - ay;
+    const float wb = (px * e2y - e2x * py) * inv;
+    const float wc = (e1x * py - px * e1y) * inv;
+    const bool in = (wb >= -kBaryEps) & (wc >= -kBaryEps) & (wb + wc <= 1.0f + kBaryEps) &
+                    (inv != 0.f);
+    const float value = ah + wb * dh1 + wc * dh2;
+    return in ? value : kLowest;
+  }
+};
+
+// Marks in `grid` (width w, rows row0..row1) the texels inside the triangles that a quad's
+// mask corners make (both triangles with four, the one triangle with three); missing corners
+// (NaN) are predicted: the parallelogram of the three others when they are valid, else
+// predict(pixel x, pixel y).
+template <class Predict>
+void DrawFootprint(TexelPoint a, TexelPoint b, TexelPoint c, TexelPoint d, int ma, int mb, int mc,
+                   int md, int x, int y, const Predict& predict, int w, int row0, int row1,
+                   uint8_t* grid) {
+  const int nvalid = a.ok() + b.ok() + c.ok() + d.ok();
+  auto fill = [&](TexelPoint& p, const TexelPoint& q, const TexelPoint& r, const TexelPoint& o,
+                  int px, int py) {
+    if (p.ok()) return;
+    if (nvalid == 3) {  // p = q + r - o, o the corner opposite p
+      p = {q.x + r.x - o.x, q.y + r.y - o.y, 0.f};
+    } else {
+      p = predict(px, py);
     }
+  };
+  fill(a, b, c, d, x, y);
+  fill(b, a, d, c, x + 1, y);
+  fill(c, a, d, b, x, y + 1);
+  fill(d, b, c, a, x + 1, y + 1);
+  const TexelPoint* tri[2][3];
+  int ntri = 0;
+  if (ma + mb + mc + md == 4) {
+    tri[0][0] = &a, tri[0][1] = &b, tri[0][2] = &d;
+    tri[1][0] = &a, tri[1][1] = &d, tri[1][2] = &c;
+    ntri = 2;
+  } else {
+    tri[0][0] = ma ? &a : &b, tri[0][1] = md ? &d : &b, tri[0][2] = mc ? &c : &b;
+    if (!mb) tri[0][0] = &a, tri[0][1] = &d, tri[0][2] = &c;
+    ntri = 1;
+  }
+  for (int t = 0; t < ntri; ++t) {
+    const TexelPoint &p = *tri[t][0], &q = *tri[t][1], &r = *tri[t][2];
+    float minx = std::min({p.x, q.x, r.x}), maxx = std::max({p.x, q.x, r.x});
+    float miny = std::min({p.y, q.y, r.y}), maxy = std::max({p.y, q.y, r.y});
+    minx = std::max(minx, -1.f), maxx = std::min(maxx, static_cast<float>(w));
+    miny = std::max(miny, static_cast<float>(row0 - 1));
+    maxy = std::min(maxy, static_cast<float>(row1 + 1));
+    if (!(minx <= maxx && miny <= maxy)) continue;
+    const int i0 = std::max(0, CeilFrom(minx)), i1 = std::min(w - 1, FloorFrom(maxx));
+    const int j0 = std::max(row0, CeilFrom(miny)), j1 = std::min(row1, FloorFrom(maxy));
+    const TriangleSetup setup(p, q, r);
+    for (int j = j0; j <= j1; ++j)
+      for (int i = i0; i <= i1; ++i)
+        if (setup.At(i, j) > kLowest) grid[static_cast<size_t>(j) * w + i] = 255;
   }
 }
 
 // Pixels of `mask` (0/255) not reachable from the border through non-mask pixels -> 255.
 cv::Mat EnclosedIslands(const cv::Mat& mask) {
+  cv::Mat islands = cv::Mat::zeros(mask.size(), CV_8U);
+  // Islands lie inside the mask's bounding rectangle: flood only that part.
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.empty()) return islands;
   cv::Mat inverse, padded;
-  cv::bitwise_not(mask, inverse);
+  cv::bitwise_not(mask(box), inverse);
   cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
   cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
-  return padded(cv::Rect(1, 1, mask.cols, mask.rows)).clone();
+  padded(cv::Rect(1, 1, box.width, box.height)).copyTo(islands(box));
+  return islands;
 }
 
 // Scratch space of the hole filler, one per thread (no per-hole allocation in steady state).
@@ -327,7 +363,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   if (!extent.allFinite() || extent.x() < 0 || extent.y() < 0)
     return Error{src + ": invalid canvas extent"};
 
-  double tmark_ = NowS(), cmark_ = CpuS();
   // ---- 1. Per scan row and chunk of kChunk + 1 vertices: the canvas-Y range (mm) of its canvas
   // samples, so every chunk of quads can be listed in the output bands it reaches. 3D
   // distances do not depend on the frame: the spacing is measured on the raw samples.
@@ -365,7 +400,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   if (count < 3)
     return Error{src + ": the canvas mask holds " + std::to_string(count) +
                  " valid samples, too few to resample"};
-  TMARK("ranges")
   double spacing = MedianSpacing(xyz, canvas.mask_scan, 1, 0, count);
   if (!(spacing > 0)) spacing = MedianSpacing(xyz, canvas.mask_scan, 0, 1, count);
   const double pitch = options.pitch_mm > 0 ? options.pitch_mm : spacing;
@@ -379,15 +413,16 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
                  " mm canvas at pitch " + std::to_string(pitch) + " mm needs " +
                  std::to_string(static_cast<long long>(gw)) + " x " +
                  std::to_string(static_cast<long long>(gh)) + " texels, more than " +
-                 std::to_string(options.max_texels_per_side) + " per side; raise pitch_mm"};
+                 std::to_string(options.max_texels_per_side) +
+                 " per side (max_texels_per_side); raise pitch_mm"};
   const int w = std::max(1, static_cast<int>(gw)), h = std::max(1, static_cast<int>(gh));
   // Edges are judged against the coarser of the output pitch and the scan spacing, so a fine
   // output pitch does not discard every triangle.
   const double edge_limit = options.max_edge_factor * std::max(pitch, spacing);
   const float edge_limit2 = static_cast<float>(edge_limit * edge_limit);
-  TMARK("spacing")
 
   // ---- 2. Chunks of quads listed in the output bands (kBandRows texel rows) they reach.
+  const double margin_rows = 1.0 + spacing / pitch;
   const int bands = (h + kBandRows - 1) / kBandRows;
   const size_t chunk_count = static_cast<size_t>(chunks_per_row) * qh;
   std::vector<std::vector<uint32_t>> band_chunks(static_cast<size_t>(bands));
@@ -399,8 +434,10 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
       const float yhi = std::max(row_yhi[i0], row_yhi[i1]);
       if (!(ylo <= yhi)) continue;
       // Texel rows: ty = h - Y / pitch - 0.5 (height_field.h), so Y's maximum gives the first.
-      const double j0 = std::max(0.0, std::ceil(h - yhi / pitch - 0.5 - 1e-3));
-      const double j1 = std::min(double(h - 1), std::floor(h - ylo / pitch - 0.5 + 1e-3));
+      // The margin covers the outline's predicted positions of missing samples (about one
+      // sample spacing from their valid neighbours).
+      const double j0 = std::max(0.0, std::ceil(h - yhi / pitch - 0.5 - margin_rows));
+      const double j1 = std::min(double(h - 1), std::floor(h - ylo / pitch - 0.5 + margin_rows));
       if (j0 > j1) continue;
       const size_t ci = static_cast<size_t>(y) * chunks_per_row + c;
       first_band[ci] = static_cast<int>(j0) / kBandRows;
@@ -409,7 +446,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
     }
   std::vector<float>().swap(row_ylo);
   std::vector<float>().swap(row_yhi);
-  TMARK("buckets")
 
   // ---- 3. Per band: transform the chunk's two vertex rows to texel coordinates, choose the
   // quads' triangles, draw them into the band's rows.
@@ -438,6 +474,44 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
     tf.m = to_texel.cast<float>();
     tf.t = (to_texel * tf.ref.cast<double>() + offset).cast<float>();
   }
+  // Texel position of a missing canvas sample (for the outline only): a quadratic map of the
+  // scan pixel fitted to the valid ones, unless the parallelogram of a quad's three valid
+  // corners gives it.
+  Eigen::Matrix<double, 6, 2> pixel_map = Eigen::Matrix<double, 6, 2>::Zero();
+  bool have_map = false;
+  auto basis = [sw, sh](int x, int y) {
+    const double u = (x - 0.5 * sw) / std::max(sw, 1), v = (y - 0.5 * sh) / std::max(sh, 1);
+    Eigen::Matrix<double, 6, 1> b;
+    b << 1, u, v, u * u, u * v, v * v;
+    return b;
+  };
+  {
+    const int stride = std::max(
+        1, static_cast<int>(std::sqrt(static_cast<double>(count) / kMapSamples)));
+    Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 2> atb = Eigen::Matrix<double, 6, 2>::Zero();
+    size_t n = 0;
+    for (int y = 0; y < sh; y += stride)
+      for (int x = 0; x < sw; x += stride) {
+        if (!canvas.mask_scan(x, y) || !Usable(xyz(x, y))) continue;
+        const Eigen::Vector3f t = tf.m * (xyz(x, y) - tf.ref) + tf.t;
+        const Eigen::Matrix<double, 6, 1> b = basis(x, y);
+        ata += b * b.transpose();
+        atb.col(0) += b * t.x();
+        atb.col(1) += b * t.y();
+        ++n;
+      }
+    if (n >= 12) {
+      pixel_map = ata.completeOrthogonalDecomposition().solve(atb);
+      have_map = pixel_map.allFinite();
+    }
+  }
+  auto predict = [&](int x, int y) {
+    const Eigen::Matrix<double, 6, 1> b = basis(x, y);
+    return TexelPoint{static_cast<float>(b.dot(pixel_map.col(0))),
+                      static_cast<float>(b.dot(pixel_map.col(1))), 0.f};
+  };
+  Grid<uint8_t> footprint(w, h, 0);  // texels inside mask quads whose triangles were not drawn
   const float pitch2 = static_cast<float>(pitch * pitch);
   auto dist2 = [pitch2](const TexelPoint& p, const TexelPoint& q) {
     const float dx = p.x - q.x, dy = p.y - q.y, dh = p.h - q.h;
@@ -454,6 +528,8 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
             const int x0 = static_cast<int>(ci % chunks_per_row) * kChunk;
             const int x1 = std::min(qw, x0 + kChunk);  // quads x0 .. x1 - 1
             const bool count_here = first_band[ci] == b;
+            const uint8_t* m0 = canvas.mask_scan.Row(y) + x0;
+            const uint8_t* m1 = canvas.mask_scan.Row(y + 1) + x0;
             for (int r = 0; r < 2; ++r)
               TexelRow(xyz.Row(y + r) + x0, canvas.mask_scan.Row(y + r) + x0, x1 - x0 + 1, tf,
                        r == 0 ? r0 : r1);
@@ -462,7 +538,15 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
                                &D = r1[x - x0 + 1];
               const int va = A.ok(), vb = B.ok(), vc = C.ok(), vd = D.ok();
               const int nvalid = va + vb + vc + vd;
-              if (nvalid < 3) continue;
+              const int k = x - x0;
+              const int ma = m0[k] != 0, mb = m0[k + 1] != 0, mc = m1[k] != 0, md = m1[k + 1] != 0;
+              const int nmask = ma + mb + mc + md;
+              if (nvalid < 3) {
+                if (nmask >= 3 && have_map)
+                  DrawFootprint(A, B, C, D, ma, mb, mc, md, x, y, predict, w, row0, row1,
+                                footprint.data.data());
+                continue;
+              }
               uint8_t cand = 0;
               if (nvalid == 4)
                 cand = dist2(A, D) <= dist2(B, C) ? (kABD | kADC) : (kABC | kBDC);
@@ -481,14 +565,45 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
               if ((cand & kBDC) && short_edge(B, D) && short_edge(D, C) && short_edge(B, C))
                 keep |= kBDC;
               if (count_here) {
-                const int ncand = __builtin_popcount(cand), nkeep = __builtin_popcount(keep);
+                const int ncand = kBits[cand], nkeep = kBits[keep];
                 cnt.drawn += nkeep;
                 cnt.skipped += ncand - nkeep;
               }
-              if (keep & kABD) DrawTriangle(A, B, D, w, row0, row1, out);
-              if (keep & kADC) DrawTriangle(A, D, C, w, row0, row1, out);
-              if (keep & kABC) DrawTriangle(A, B, C, w, row0, row1, out);
-              if (keep & kBDC) DrawTriangle(B, D, C, w, row0, row1, out);
+              if (kBits[keep] < 2 && nmask >= 3 && (nvalid == 3 || have_map))
+                DrawFootprint(A, B, C, D, ma, mb, mc, md, x, y, predict, w, row0, row1,
+                              footprint.data.data());
+              if (!keep) continue;
+              // Texel centres inside the quad's box (usually one or two), then per triangle.
+              const TexelPoint* tri[2][3];
+              int ntri = 0;
+              if (keep & kABD) tri[ntri][0] = &A, tri[ntri][1] = &B, tri[ntri++][2] = &D;
+              if (keep & kADC) tri[ntri][0] = &A, tri[ntri][1] = &D, tri[ntri++][2] = &C;
+              if (keep & kABC) tri[ntri][0] = &A, tri[ntri][1] = &B, tri[ntri++][2] = &C;
+              if (keep & kBDC) tri[ntri][0] = &B, tri[ntri][1] = &D, tri[ntri++][2] = &C;
+              float minx = tri[0][0]->x, maxx = minx, miny = tri[0][0]->y, maxy = miny;
+              for (int t = 0; t < ntri; ++t)
+                for (int k = 0; k < 3; ++k) {
+                  minx = std::min(minx, tri[t][k]->x), maxx = std::max(maxx, tri[t][k]->x);
+                  miny = std::min(miny, tri[t][k]->y), maxy = std::max(maxy, tri[t][k]->y);
+                }
+              // Clamp to just outside the band so the integer conversions are plain truncations.
+              minx = std::max(minx, -1.f), maxx = std::min(maxx, static_cast<float>(w));
+              miny = std::max(miny, static_cast<float>(row0 - 1));
+              maxy = std::min(maxy, static_cast<float>(row1 + 1));
+              if (!(minx <= maxx && miny <= maxy)) continue;
+              const int i0 = std::max(0, CeilFrom(minx)), i1 = std::min(w - 1, FloorFrom(maxx));
+              const int j0 = std::max(row0, CeilFrom(miny)), j1 = std::min(row1, FloorFrom(maxy));
+              if (i0 > i1 || j0 > j1) continue;
+              TriangleSetup setup[2];
+              for (int t = 0; t < ntri; ++t) setup[t] = TriangleSetup(*tri[t][0], *tri[t][1], *tri[t][2]);
+              for (int j = j0; j <= j1; ++j) {
+                float* row = out + static_cast<size_t>(j) * w;
+                for (int i = i0; i <= i1; ++i) {
+                  float value = kLowest;
+                  for (int t = 0; t < ntri; ++t) value = std::max(value, setup[t].At(i, j));
+                  row[i] = std::max(row[i], value);
+                }
+              }
             }
           }
         }
@@ -499,30 +614,26 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
         a.skipped += b.skipped;
         return a;
       });
-  TMARK("raster")
 
   // ---- 4. Outline and holes.
   cv::Mat height_mat(h, w, CV_32F, out);
   cv::Mat covered;
   cv::compare(height_mat, kLowest, covered, cv::CMP_GT);  // 255 / 0
-  const int close_r =
-      std::max(kMinCloseRadiusTx, static_cast<int>(std::ceil(2.0 * spacing / pitch)));
-  TMARK("covered")
-  cv::Mat closed;
-  cv::morphologyEx(covered, closed, cv::MORPH_CLOSE,
-                   cv::getStructuringElement(cv::MORPH_RECT,
-                                             cv::Size(2 * close_r + 1, 2 * close_r + 1)));
-  TMARK("close")
+  if (cv::countNonZero(covered) == 0)
+    return Error{src + ": no canvas triangle could be drawn (" + std::to_string(counts.skipped) +
+                 " skipped for edges longer than " + std::to_string(edge_limit) +
+                 " mm; a scan one sample wide has none)"};
+  // The outline: the footprint of the canvas mask's quads (drawn, or covered with predicted
+  // positions of missing samples) and everything it encloses. Holes: uncovered texels inside.
   cv::Mat inside;
-  cv::bitwise_or(closed, EnclosedIslands(closed), inside);
-  closed.release();
-  TMARK("inside")
+  cv::bitwise_or(covered, cv::Mat(h, w, CV_8U, footprint.data.data()), inside);
+  cv::bitwise_or(inside, EnclosedIslands(inside), inside);
+  Grid<uint8_t>().data.swap(footprint.data);
   cv::Mat holes;
   cv::bitwise_and(inside, ~covered, holes);
   cv::Mat labels, comp_stats, centroids;
   const int ncomp = cv::connectedComponentsWithStats(holes, labels, comp_stats, centroids, 8,
                                                      CV_32S);
-  TMARK("ccstats")
   holes.release();
   const double texel_area = pitch * pitch;
   std::vector<uint8_t> comp_filled(static_cast<size_t>(std::max(ncomp, 1)), 0);
@@ -532,7 +643,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
     comp_filled[static_cast<size_t>(k)] = area_mm2 <= options.max_hole_area_mm2;
     (comp_filled[static_cast<size_t>(k)] ? holes_filled : holes_unfilled)++;
   }
-  TMARK("holes classify")
   tbb::enumerable_thread_specific<FillScratch> scratch;
   tbb::parallel_for(tbb::blocked_range<int>(1, std::max(ncomp, 1), 64),
                     [&](const tbb::blocked_range<int>& r) {
@@ -551,7 +661,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
                       }
                     });
 
-  TMARK("fill")
   // ---- 5. States; outside texels at height 0; never NaN.
   struct StateCounts {
     size_t measured = 0, filled = 0, unfilled = 0, outside = 0;
@@ -590,7 +699,6 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
         a.outside += b.outside;
         return a;
       });
-  TMARK("states")
   if (stats) {
     stats->texels = static_cast<size_t>(w) * h;
     stats->measured = sc.measured;

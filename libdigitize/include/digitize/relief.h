@@ -14,6 +14,8 @@ struct ReliefOptions {
   int cell_px = 16;                // n: cells of n x n texels become boxes
   double noise_margin_mm = 0;      // classify at delta0 - margin so texels whose true height is
                                    // just above delta0 are not lost to noise (0 = none)
+  double min_relief_mm = 0.02;     // relief floor: a canvas whose highest point is not above this
+                                   // has no significant relief (no boxes)
   Status Validate() const;
 };
 
@@ -35,7 +37,8 @@ struct ReliefResult {
 };
 
 // Only texels with HasHeight() take part. Returns no boxes when nothing rises above delta0
-// (a flat canvas: max height <= 0, or all relief in specks); never fails on a valid HeightField.
+// (a flat canvas: max height <= min_relief_mm, or all relief in specks); never fails on a valid
+// HeightField.
 ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& options);
 
 }  // namespace digitize
