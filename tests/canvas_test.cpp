@@ -78,9 +78,7 @@ struct AnalyticScan {
     return h;
   }
   // Height of a scan sample above the true canvas base plane.
-  double TrueHeight(const Vec3f& p) const {
-    return canvas_from_scan.Apply(p.cast<double>()).z();
-  }
+  double TrueHeight(const Vec3f& p) const { return canvas_from_scan.Apply(p.cast<double>()).z(); }
 };
 
 bool RayBox(const Vec3d& o, const Vec3d& d, const Vec3d& lo, const Vec3d& hi, double* t) {
@@ -127,8 +125,9 @@ AnalyticScan MakeAnalyticScan(const SceneOptions& o) {
   const Eigen::AngleAxisd tilt(o.tilt_deg * deg, axis);
   RigidTransform scan_from_canvas;
   scan_from_canvas.rotation = tilt.toRotationMatrix() * roll.toRotationMatrix() * base;
-  scan_from_canvas.translation = Vec3d(o.off_x, o.off_y, o.distance) -
-                                 scan_from_canvas.rotation * Vec3d(o.canvas_w / 2, o.canvas_h / 2, 0);
+  scan_from_canvas.translation =
+      Vec3d(o.off_x, o.off_y, o.distance) -
+      scan_from_canvas.rotation * Vec3d(o.canvas_w / 2, o.canvas_h / 2, 0);
   s.canvas_from_scan = scan_from_canvas.Inverse();
   const double fw = (o.canvas_w + 2 * o.frame_width) * o.field_scale;
   const double fh = (o.canvas_h + 2 * o.frame_width) * o.field_scale;
@@ -172,8 +171,8 @@ AnalyticScan MakeAnalyticScan(const SceneOptions& o) {
         }
         s.hit(x, y) = what;
         if (what == kNone) continue;
-        const uint64_t key = (static_cast<uint64_t>(o.seed) << 40) ^
-                             (static_cast<uint64_t>(y) * o.scan_w + x);
+        const uint64_t key =
+            (static_cast<uint64_t>(o.seed) << 40) ^ (static_cast<uint64_t>(y) * o.scan_w + x);
         Vec3d ps = os + best * Vec3d(0, 0, 1);
         ps.z() += o.noise * Gaussian(key);
         if (Uniform(key ^ 0x5555555555ull) >= o.dropout) s.scan.xyz_mm(x, y) = ps.cast<float>();
@@ -192,16 +191,16 @@ AnalyticScan MakeAnalyticScan(const SceneOptions& o) {
 struct MaskScore {
   double normal_error_deg = 0;
   double iou = 0;
-  size_t frame_kept = 0;           // frame or wall pixels in the mask
-  double max_kept_height_mm = 0;   // of those, the largest |height above the canvas plane|
+  size_t frame_kept = 0;          // frame or wall pixels in the mask
+  double max_kept_height_mm = 0;  // of those, the largest |height above the canvas plane|
   size_t canvas_px = 0;
 };
 
 MaskScore Score(const CanvasResult& c, const RigidTransform& truth, const Grid<uint8_t>& hit,
                 const Scan& scan) {
   MaskScore s;
-  s.normal_error_deg = AngleDeg(c.canvas_from_scan.rotation.row(2).transpose(),
-                                truth.rotation.row(2).transpose());
+  s.normal_error_deg =
+      AngleDeg(c.canvas_from_scan.rotation.row(2).transpose(), truth.rotation.row(2).transpose());
   size_t inter = 0, uni = 0;
   for (size_t i = 0; i < hit.size(); ++i) {
     const bool est = c.mask_scan.data[i] != 0, canvas = hit.data[i] == kCanvasHit;
@@ -288,7 +287,8 @@ TEST(FitPlanePca, RecoversAKnownPlane) {
   std::uniform_real_distribution<double> u(-1, 1);
   std::normal_distribution<double> g(0, 0.01);
   std::vector<Vec3d> pts;
-  for (int i = 0; i < 20000; ++i) pts.push_back(c + 100 * u(rng) * a + 50 * u(rng) * b + g(rng) * n);
+  for (int i = 0; i < 20000; ++i)
+    pts.push_back(c + 100 * u(rng) * a + 50 * u(rng) * b + g(rng) * n);
   const PlaneFit fit = FitPlanePca(pts);
   EXPECT_EQ(fit.count, pts.size());
   // Tolerance: 0.01 mm noise over a 200 mm patch tilts the fit by ~1e-6 rad; 1e-3 deg is loose.
@@ -557,10 +557,11 @@ TEST(ExtractCanvasSynthetic, DefaultScanMeetsTheTargets) {
   ASSERT_TRUE(r.ok()) << r.error().message;
   ExpectFrameSane(*r);
   const MaskScore s = Score(*r, run);
-  std::printf("default synthetic %dx%d scan: normal %.4f deg, IoU %.5f, %zu frame px kept "
-              "(max %.3f mm above the plane), noise %.4f mm, %.3f s\n",
-              c.scan.width_px, c.scan.height_px, s.normal_error_deg, s.iou, s.frame_kept,
-              s.max_kept_height_mm, r->noise_sigma_mm, seconds);
+  std::printf(
+      "default synthetic %dx%d scan: normal %.4f deg, IoU %.5f, %zu frame px kept "
+      "(max %.3f mm above the plane), noise %.4f mm, %.3f s\n",
+      c.scan.width_px, c.scan.height_px, s.normal_error_deg, s.iou, s.frame_kept,
+      s.max_kept_height_mm, r->noise_sigma_mm, seconds);
   EXPECT_LT(s.normal_error_deg, kMaxNormalErrorDeg);
   EXPECT_GE(s.iou, kMinIoU);
   EXPECT_LE(s.max_kept_height_mm, kMaxKeptFootHeightMm);

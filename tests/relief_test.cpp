@@ -32,6 +32,7 @@ ReliefOptions Options(int cell_px, double min_area_mm2 = 0.0, double fraction = 
   o.min_component_area_mm2 = min_area_mm2;
   o.delta0_fraction = fraction;
   o.noise_margin_mm = margin_mm;
+  o.cover_px = 0;  // exact paper semantics: a cell is boxed iff it holds an Mv texel
   return o;
 }
 
@@ -102,13 +103,17 @@ void CheckAgainstBruteForce(const HeightField& f, const ReliefOptions& o, const 
     for (int y = b.y0; y < b.y0 + b.height; ++y)
       for (int x = b.x0; x < b.x0 + b.width; ++x) {
         ++covered(x, y);
-        any_valid |= expected(x, y) != 0;
         if (HasHeight(f.state(x, y)) && f.height_mm(x, y) > peak) {
           peak = f.height_mm(x, y);
           pu = x;
           pv = y;
         }
       }
+    // With cover_px > 0 a box may hold no Mv texel itself but one within cover_px of its cell.
+    const int c = o.cover_px;
+    for (int y = std::max(0, b.y0 - c); y < std::min(f.height(), b.y0 + b.height + c); ++y)
+      for (int x = std::max(0, b.x0 - c); x < std::min(f.width(), b.x0 + b.width + c); ++x)
+        any_valid |= expected(x, y) != 0;
     EXPECT_TRUE(any_valid) << "box at " << b.x0 << "," << b.y0 << " holds no relief";
     EXPECT_EQ(b.h_max_mm, peak);
     EXPECT_EQ(b.u_max, pu);
@@ -436,6 +441,21 @@ TEST(Relief, NoiseMarginLowersTheThresholdOnly) {
   r = ClassifyRelief(f, Options(4, 0.0, 0.3, 3.5));
   EXPECT_EQ(r.texels_above, 2u);
   EXPECT_EQ(r.boxes.size(), 2u);
+}
+
+TEST(Relief, CoverGrowsBoxesByOneTexelAcrossCellBorders) {
+  HeightField f = MakeField(16, 16, 0.25);
+  f.height_mm(3, 5) = 1.0f;  // last column of cell (0, 1) with 4x4 cells: only that cell is boxed
+  ReliefOptions o = Options(4);
+  ReliefResult r = ClassifyRelief(f, o);
+  ASSERT_EQ(r.boxes.size(), 1u);
+  o.cover_px = 1;  // the one-texel ring reaches cells (1, 1), (0, 1)'s neighbours in x only
+  r = ClassifyRelief(f, o);
+  EXPECT_EQ(r.boxes.size(), 2u);
+  EXPECT_EQ(r.texels_above, 1u) << "cover widens the boxes, not Mv";
+  for (const ReliefBox& b : r.boxes) EXPECT_EQ(b.y0, 4);
+  o.cover_px = -1;
+  EXPECT_NE(o.Validate().message().find("cover_px"), std::string::npos);
 }
 
 TEST(Relief, FlatCanvasBelowTheReliefFloorHasNoBoxes) {

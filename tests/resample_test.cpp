@@ -114,7 +114,8 @@ TEST(ResampleOptions, DefaultsValidateAndAbsurdValuesAreNamed) {
   };
   const Case cases[] = {
       {[](ResampleOptions& o) { o.pitch_mm = -1; }, "pitch_mm"},
-      {[](ResampleOptions& o) { o.pitch_mm = std::numeric_limits<double>::infinity(); }, "pitch_mm"},
+      {[](ResampleOptions& o) { o.pitch_mm = std::numeric_limits<double>::infinity(); },
+       "pitch_mm"},
       {[](ResampleOptions& o) { o.max_edge_factor = 0; }, "max_edge_factor"},
       {[](ResampleOptions& o) { o.max_hole_area_mm2 = -4; }, "max_hole_area_mm2"},
       {[](ResampleOptions& o) { o.max_texels_per_side = 0; }, "max_texels_per_side"},
@@ -348,7 +349,7 @@ TEST(ResampleToCanvasGrid, GarbageInsideTheMaskNeverReachesTheOutput) {
   for (int y = 10; y < 90; y += 7)
     for (int x = 10; x < 118; x += 11, ++k) {
       if (!s.canvas.mask_scan(x, y)) continue;
-      s.scan.xyz_mm(x, y) = k % 3 == 0 ? Vec3f(inf, 0, 0)
+      s.scan.xyz_mm(x, y) = k % 3 == 0   ? Vec3f(inf, 0, 0)
                             : k % 3 == 1 ? Vec3f(1e30f, 1e30f, 1e30f)
                                          : Vec3f(kMissing, 0, 600);
     }
@@ -415,14 +416,14 @@ SynthOutcome RunSynthetic(const synth::PaintingOptions& po, const synth::ScanSim
   out.accuracy = synth::MeasureAccuracy(result, painting, truth);
   out.canvas_s = std::chrono::duration<double>(t1 - t0).count();
   out.resample_s = std::chrono::duration<double>(t2 - t1).count();
-  std::printf("synthetic %dx%d scan of a %d px painting, noise %.3f mm: normal %.4f deg, IoU %.5f, "
-              "frame px kept %zu, height RMSE %.4f mm over %zu texels (%zu filled, %zu unfilled); "
-              "canvas %.3f s, resample %.3f s\n",
-              so.width_px, so.height_px, po.resolution_px, so.noise_mm,
-              out.accuracy.normal_error_deg, out.accuracy.mask_iou,
-              out.accuracy.frame_pixels_kept, out.accuracy.height_rmse_mm,
-              out.accuracy.texels_compared, out.stats.filled, out.stats.unfilled, out.canvas_s,
-              out.resample_s);
+  std::printf(
+      "synthetic %dx%d scan of a %d px painting, noise %.3f mm: normal %.4f deg, IoU %.5f, "
+      "frame px kept %zu, height RMSE %.4f mm over %zu texels (%zu filled, %zu unfilled); "
+      "canvas %.3f s, resample %.3f s\n",
+      so.width_px, so.height_px, po.resolution_px, so.noise_mm, out.accuracy.normal_error_deg,
+      out.accuracy.mask_iou, out.accuracy.frame_pixels_kept, out.accuracy.height_rmse_mm,
+      out.accuracy.texels_compared, out.stats.filled, out.stats.unfilled, out.canvas_s,
+      out.resample_s);
   return out;
 }
 

@@ -19,7 +19,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -43,9 +42,14 @@ constexpr double kPriorC = -1.0;  // the mirror lobe (cx = cy = -1) the prior pu
 constexpr double kFunctionTolerance = 1e-6;
 constexpr double kParameterTolerance = 1e-8;
 constexpr double kGradientTolerance = 1e-10;
-// Grid spacing of the initial search over k: a factor 2 keeps every lobe within ~20 % of its
-// width of a grid point, so LM starts in the right basin even for narrow lobes.
-constexpr double kGridFactor = 2.0;
+// Grid spacing of the initial search over k (then refined by a parabola): a factor 4 keeps every
+// lobe within a factor 2 of a grid point, close enough for LM to start in the right basin even
+// for narrow lobes (a factor 2 grid gave the same relighting error at twice the grid cost).
+constexpr double kGridFactor = 4.0;
+// Lobe exponents (k log base) below this give g = 0 (see SetExponent); kLogZero marks a clamped
+// base: times any k >= 0.5 it is far below kMinLobeLog, and finite.
+constexpr float kMinLobeLog = -40.0f;
+constexpr float kLogZero = -1e30f;
 // Texels per parallel task: large enough to amortise the workspace, small enough to balance.
 constexpr size_t kTexelGrain = 64;
 
@@ -55,7 +59,7 @@ using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 // vectorises every pass over the samples, exp and log included). Capacity grows, never shrinks.
 class Workspace {
  public:
-  static constexpr int kArrays = 24;
+  static constexpr int kArrays = 26;
   float* Reserve(int n) {
     if (n > capacity_) {
       capacity_ = std::max(n, 2 * capacity_);
@@ -122,11 +126,17 @@ struct LinearFit {
 };
 
 // One texel's valid samples and the kernels both paths share. Arrays live in the workspace
-// (slots below); each accessor is an Eigen view of length n.
+// (slots below), padded with zero samples to a multiple of kBlock: a zero irradiance and zero
+// direction products make a padded sample contribute exactly 0 to every sum, so the kernels run
+// whole blocks of 8 floats that Eigen maps onto SIMD registers, several sums per pass.
 class TexelProblem {
  public:
+  static constexpr int kBlock = 8;
+  using Block = Eigen::Array<float, kBlock, 1>;
+
   TexelProblem(std::span<const BrdfSample> samples, const BrdfFitOptions& options, Workspace& ws) {
-    p_ = ws.Reserve(std::max<int>(1, static_cast<int>(samples.size())));
+    const int padded_max = static_cast<int>((samples.size() + kBlock - 1) / kBlock * kBlock);
+    p_ = ws.Reserve(std::max(kBlock, padded_max));
     cap_ = ws.capacity();
     const double saturation = options.saturation_radiance;
     for (const BrdfSample& s : samples) {
@@ -134,9 +144,13 @@ class TexelProblem {
             s.irradiance.allFinite()))
         continue;
       if ((s.irradiance.array() < 0.0f).any() || !(s.irradiance.maxCoeff() > 0.0f)) continue;
-      const float vn = s.view_dir.norm(), ln = s.light_dir.norm();
-      if (!(vn > 0.0f && ln > 0.0f)) continue;
-      const Vec3f v = s.view_dir / vn, l = s.light_dir / ln;  // tolerate slightly non-unit input
+      Vec3f v = s.view_dir, l = s.light_dir;
+      // Tolerate slightly non-unit input (the lobe is not scale invariant); the check first
+      // because two divisions per sample are a visible part of a 5 us fit.
+      const float vn2 = v.squaredNorm(), ln2 = l.squaredNorm();
+      if (!(vn2 > 0.0f && ln2 > 0.0f)) continue;
+      if (std::abs(vn2 - 1.0f) > 1e-6f) v /= std::sqrt(vn2);
+      if (std::abs(ln2 - 1.0f) > 1e-6f) l /= std::sqrt(ln2);
       if (!(v.z() > 0.0f && l.z() > 0.0f)) continue;
       if (s.radiance.maxCoeff() >= saturation) {
         ++saturated_;
@@ -151,6 +165,8 @@ class TexelProblem {
         Slot(kL + c)[i] = s.radiance[c];
       }
     }
+    np_ = std::max(kBlock, (n_ + kBlock - 1) / kBlock * kBlock);
+    for (int slot = kAx; slot < kE2; ++slot) std::fill(Slot(slot) + n_, Slot(slot) + np_, 0.0f);
     for (int c = 0; c < 3; ++c) {
       e2(c) = e(c).square();
       el(c) = e(c) * L(c);
@@ -161,11 +177,14 @@ class TexelProblem {
     const double mean_square = n_ > 0 ? (sums_[0].ll + sums_[1].ll + sums_[2].ll) / (3.0 * n_) : 0.0;
     prior_w2_ = options.lobe_prior_weight * options.lobe_prior_weight * n_ * mean_square;
     max_specular_albedo_ = options.max_specular_albedo;
+    // w sigma^2 per (specular albedo / 0.1)^2 per channel; see brdf_fit.h.
+    albedo_ridge_ = options.specular_prior_weight * options.noise_sigma * options.noise_sigma / (0.1 * 0.1);
   }
 
   int n() const { return n_; }
   int saturated() const { return saturated_; }
   double prior_w2() const { return prior_w2_; }
+  double albedo_ridge() const { return albedo_ridge_; }
   // The per-sample data as the reference path's cost functors take it.
   Vec3f Products(int i) const { return {Slot(kAx)[i], Slot(kAy)[i], Slot(kAz)[i]}; }
   Vec3f Irradiance(int i) const { return {Slot(kE)[i], Slot(kE + 1)[i], Slot(kE + 2)[i]}; }
@@ -181,126 +200,188 @@ class TexelProblem {
     return sse;
   }
 
-  // log of the clamped base for (cx, cy), and the mask of samples with a positive base.
+  // The base for (cx, cy), clamped below at kLobeBaseEps, and its log, kLogZero where the base
+  // is clamped (so the lobe there comes out exactly 0 for every k).
   void SetLobeDirection(double cx, double cy) {
-    tmp() = static_cast<float>(cx) * View(kAx) + static_cast<float>(cy) * View(kAy) + View(kAz);
-    mask() = (tmp() > kLobeBaseEps).cast<float>();
-    log_base() = tmp().max(kLobeBaseEps).log();
+    base() = (static_cast<float>(cx) * View(kAx) + static_cast<float>(cy) * View(kAy) + View(kAz));
+    log_base() = (base() > kLobeBaseEps).select(base().max(kLobeBaseEps).log(), kLogZero);
+    base() = base().max(kLobeBaseEps);
   }
   // g (and dg/dcx, dg/dcy, dg/dt with t = log k) for the direction set last. The exponent is
-  // <= 0 here up to rounding (|cx|, |cy| <= 1 keeps the base <= 1), capped for safety anyway.
+  // <= 0 here up to rounding (|cx|, |cy| <= 1 keeps the base <= 1). Lobe values below
+  // exp(kMinLobeLog) ~ 4e-18 of the peak are set to 0: they change nothing, and left in, their
+  // squares and products are float denormals, which cost ~100 cycles each on x86 and made the
+  // whole fit several times slower.
   void SetExponent(double k, bool derivatives) {
     k_ = k;
     const float kf = static_cast<float>(k);
-    g() = mask() * (kf * log_base()).min(kMaxLobeLog).exp();
+    tmp() = kf * log_base();
+    g() = (tmp() > kMinLobeLog).select(tmp().max(kMinLobeLog).min(kMaxLobeLog).exp(), 0.0f);
     if (!derivatives) return;
-    // dg/dc = k g / base * dbase/dc; base = exp(log_base) >= eps wherever g != 0.
-    tmp() = kf * g() * (-log_base()).exp();
+    tmp() = kf * g() / base();  // dg/dc = k g / base * dbase/dc
     d(0) = tmp() * View(kAx);
     d(1) = tmp() * View(kAy);
-    d(2) = kf * g() * log_base();  // dg/dt = k dg/dk = k g log(base)
+    d(2) = kf * g() * log_base().max(kMinLobeLog);  // dg/dt = k dg/dk = k g log(base); g = 0 where clamped
   }
   void SetShape(const Shape& s, bool derivatives) {
     SetLobeDirection(s.cx, s.cy);
     SetExponent(std::exp(s.t), derivatives);
   }
 
-  // Variable projection: the best non-negative (a, b) per channel for the current g.
+  // Energy bound on rho_s for the current k: the lobe's reflected fraction at normal view,
+  // rho_s * integral of z^k z over the hemisphere = rho_s 2 pi / (k + 2), at most A.
+  double BMax() const { return max_specular_albedo_ * (k_ + 2.0) / (2.0 * kPi); }
+  // Ridge on rho_s for exponent k: the albedo ridge on A = rho_s 2 pi / (k + 2), per rho_s^2.
+  double Ridge(double k) const {
+    const double to_albedo = 2.0 * kPi / (k + 2.0);
+    return albedo_ridge_ * to_albedo * to_albedo;
+  }
+  // Both priors: the lobe direction's and the specular albedo's.
+  double Penalty(const Shape& s, const LinearFit& fit) const {
+    double b2 = 0;
+    for (const ChannelFit& f : fit.channel) b2 += f.b * f.b;
+    return prior_w2_ * ((s.cx - kPriorC) * (s.cx - kPriorC) + (s.cy - kPriorC) * (s.cy - kPriorC)) +
+           Ridge(std::exp(s.t)) * b2;
+  }
+
+  // Variable projection: the best (a, b) per channel for the current g, and the sums it used
+  // (s2 including the ridge). One pass per channel for s1, s2, p1.
   LinearFit SolveLinear(std::array<ChannelSums, 3>* sums_out = nullptr) {
     LinearFit fit;
+    const float* g_ptr = Slot(kG);
     for (int c = 0; c < 3; ++c) {
+      const float* e2_ptr = Slot(kE2 + c);
+      const float* el_ptr = Slot(kEL + c);
+      Block s1 = Block::Zero(), s2 = Block::Zero(), p1 = Block::Zero();
+      for (int i = 0; i < np_; i += kBlock) {
+        const Block g = Block::Map(g_ptr + i), w = Block::Map(e2_ptr + i) * g;
+        s1 += w;
+        s2 += w * g;
+        p1 += Block::Map(el_ptr + i) * g;
+      }
       ChannelSums m = sums_[c];
-      tmp() = e2(c) * g();
-      m.s1 = tmp().sum();
-      m.s2 = (tmp() * g()).sum();
-      m.p1 = (el(c) * g()).sum();
+      m.s1 = s1.sum();
+      m.s2 = s2.sum() + Ridge(k_);  // the ridge is one more (fake) residual sqrt(ridge) b per channel
+      m.p1 = p1.sum();
       fit.channel[c] = SolveChannel(m, BMax());
       if (sums_out) (*sums_out)[c] = m;
     }
     return fit;
   }
 
-  // Exact squared error of the model for the current g (direct, no cancellation).
+  // Exact squared error of the model for the current g (direct, no cancellation), one pass.
   double Sse(const LinearFit& fit) {
-    double sse = 0;
+    const float* g_ptr = Slot(kG);
+    float a[3], b[3];
     for (int c = 0; c < 3; ++c) {
-      const float a = static_cast<float>(fit.channel[c].a), b = static_cast<float>(fit.channel[c].b);
-      sse += (e(c) * (a + b * g()) - L(c)).square().sum();
+      a[c] = static_cast<float>(fit.channel[c].a);
+      b[c] = static_cast<float>(fit.channel[c].b);
     }
-    return sse;
-  }
-  // Energy bound on rho_s for the current k: the lobe's reflected fraction at normal view,
-  // rho_s * integral of z^k z over the hemisphere = rho_s 2 pi / (k + 2), at most A.
-  double BMax() const { return max_specular_albedo_ * (k_ + 2.0) / (2.0 * kPi); }
-  double Prior(const Shape& s) const {
-    return prior_w2_ * ((s.cx - kPriorC) * (s.cx - kPriorC) + (s.cy - kPriorC) * (s.cy - kPriorC));
+    Block acc = Block::Zero();
+    for (int i = 0; i < np_; i += kBlock) {
+      const Block g = Block::Map(g_ptr + i);
+      for (int c = 0; c < 3; ++c)
+        acc += (Block::Map(Slot(kE + c) + i) * (a[c] + b[c] * g) - Block::Map(Slot(kL + c) + i)).square();
+    }
+    return acc.sum();
   }
 
   // Gauss-Newton system of the reduced problem at the current g and derivatives: gradient
   // J^T r (exact for the reduced cost: the residual is orthogonal to the free linear columns at
   // their optimum) and Kaufman's projected J^T J = J^T (I - P_Phi) J, where Phi holds the
-  // columns of the free linear unknowns; the unprojected J^T J overestimates the curvature.
+  // columns of the free linear unknowns (the unprojected J^T J overestimates the curvature and
+  // slows LM), computed as V - Q^T M^-1 Q from sums (one pass per channel).
   // A channel whose b sits on the energy bound b_max(k) has b = b_max(t), so its residual also
   // moves with t through b: the extra column e g db_max/dt.
   void NormalEquations(const LinearFit& fit, const std::array<ChannelSums, 3>& sums, const Shape& shape,
                        Eigen::Matrix3d* jtj, Eigen::Vector3d* jtr) {
     jtj->setZero();
     jtr->setZero();
-    // The b dg part: J^T J = sum_s (sum_c b_c^2 e_c^2) dg dg^T and J^T r = sum_s dg sum_c b_c e_c
-    // r_c, with the channel weights folded first so each entry is one pass over the samples.
-    tmp().setZero();   // sum_c b_c^2 e_c^2
-    tmp2().setZero();  // sum_c b_c e_c r_c
-    for (int c = 0; c < 3; ++c) {
-      const double b = fit.channel[c].b;
-      if (b <= 0.0) continue;  // no lobe in this channel: its residual does not depend on theta
-      const float af = static_cast<float>(fit.channel[c].a), bf = static_cast<float>(b);
-      tmp() += (bf * bf) * e2(c);
-      tmp2() += bf * e(c) * (e(c) * (af + bf * g()) - L(c));
-    }
-    for (int i = 0; i < 3; ++i) {
-      (*jtr)[i] = (tmp2() * d(i)).sum();
-      for (int j = i; j < 3; ++j) (*jtj)(i, j) = (*jtj)(j, i) = (tmp() * d(i) * d(j)).sum();
-    }
     const double dbmax_dt = max_specular_albedo_ * k_ / (2.0 * kPi);
-    const Eigen::Vector3d et(0.0, 0.0, 1.0);
+    const float* g_ptr = Slot(kG);
+    const float* d_ptr[3] = {Slot(kD), Slot(kD + 1), Slot(kD + 2)};
     for (int c = 0; c < 3; ++c) {
       const ChannelFit& f = fit.channel[c];
       const double b = f.b;
-      if (b <= 0.0) continue;
+      if (b <= 0.0) continue;  // no lobe in this channel: its residual does not depend on theta
       const ChannelSums& m = sums[c];
-      Eigen::Vector3d t, u;  // sum e^2 dg_j, sum e^2 g dg_j
-      tmp2() = e2(c) * g();
-      for (int j = 0; j < 3; ++j) {
-        t[j] = (e2(c) * d(j)).sum();
-        u[j] = (tmp2() * d(j)).sum();
+      const float af = static_cast<float>(f.a), bf = static_cast<float>(b);
+      const float* e_ptr = Slot(kE + c);
+      const float* l_ptr = Slot(kL + c);
+      const float* e2_ptr = Slot(kE2 + c);
+      // Per dg_j: t = sum e^2 dg, u = sum e^2 g dg, er = sum e r dg; v = sum e^2 dg_i dg_j.
+      Block t[3], u[3], er[3], v[6];
+      for (Block& x : t) x.setZero();
+      for (Block& x : u) x.setZero();
+      for (Block& x : er) x.setZero();
+      for (Block& x : v) x.setZero();
+      for (int i = 0; i < np_; i += kBlock) {
+        const Block g = Block::Map(g_ptr + i), e2 = Block::Map(e2_ptr + i), e = Block::Map(e_ptr + i);
+        const Block e2g = e2 * g;
+        const Block er_s = e * (e * (af + bf * g) - Block::Map(l_ptr + i));
+        const Block d0 = Block::Map(d_ptr[0] + i), d1 = Block::Map(d_ptr[1] + i), d2 = Block::Map(d_ptr[2] + i);
+        t[0] += e2 * d0;
+        t[1] += e2 * d1;
+        t[2] += e2 * d2;
+        u[0] += e2g * d0;
+        u[1] += e2g * d1;
+        u[2] += e2g * d2;
+        er[0] += er_s * d0;
+        er[1] += er_s * d1;
+        er[2] += er_s * d2;
+        v[0] += e2 * d0 * d0;
+        v[1] += e2 * d0 * d1;
+        v[2] += e2 * d0 * d2;
+        v[3] += e2 * d1 * d1;
+        v[4] += e2 * d1 * d2;
+        v[5] += e2 * d2 * d2;
       }
+      // Column j of this channel's Jacobian is e w_j, w_j = b dg_j (+ beta g for t when b sits
+      // on b_max(t)): scale the sums by b and add the beta terms.
       const double beta = f.b_at_max ? dbmax_dt : 0.0;
+      Eigen::Vector3d tj, uj;
+      Eigen::Matrix3d vv;
+      for (int j = 0; j < 3; ++j) {
+        tj[j] = b * t[j].sum();
+        uj[j] = b * u[j].sum();
+        (*jtr)[j] += b * er[j].sum();
+      }
+      const int index[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) vv(i, j) = b * b * v[index[i][j]].sum();
+      const double s2_data = m.s2 - Ridge(k_);  // the ridge row is not a sample
       if (beta > 0.0) {
-        // Column t gains beta e g: cross terms with b e dg and its own square, and the gradient
-        // sum e g r = a s1 + b s2 - p1.
-        *jtj += b * beta * (u * et.transpose() + et * u.transpose()) + beta * beta * m.s2 * et * et.transpose();
-        (*jtr)[2] += beta * (f.a * m.s1 + b * m.s2 - m.p1);
+        const Eigen::Vector3d et(0.0, 0.0, 1.0);
+        vv += beta * (uj * et.transpose() + et * uj.transpose()) + beta * beta * s2_data * et * et.transpose();
+        tj[2] += beta * m.s1;
+        uj[2] += beta * s2_data;
+        (*jtr)[2] += beta * (f.a * m.s1 + b * s2_data - m.p1);  // sum e g r
       }
-      // Projection onto the complement of the free linear columns: subtract Q^T M^-1 Q with
-      // Q = Phi^T J, M = Phi^T Phi.
+      // Projection onto the complement of the free linear columns: subtract Q^T M^-1 Q,
+      // Q = Phi^T (e w), M = Phi^T Phi.
       const bool a_free = f.a > 0.0, b_free = !f.b_at_max;
-      if (a_free && b_free) {
-        const double det = m.s0 * m.s2 - m.s1 * m.s1;
-        if (det > 1e-12 * m.s0 * m.s2 && det > 0.0) {
-          // Q = b [t; u], M^-1 = [s2 -s1; -s1 s0] / det.
-          const Eigen::Matrix3d proj = (m.s2 * t * t.transpose() - m.s1 * (t * u.transpose() + u * t.transpose()) +
-                                        m.s0 * u * u.transpose()) / det;
-          *jtj -= b * b * proj;
-        }
-      } else if (a_free && m.s0 > 0.0) {  // b on its bound: Phi = [e], Q = b t + beta s1 e_t
-        const Eigen::Vector3d q = b * t + beta * m.s1 * et;
-        *jtj -= q * q.transpose() / m.s0;
-      } else if (b_free && m.s2 > 0.0) {  // a = 0: Phi = [e g], Q = b u
-        *jtj -= b * b * (u * u.transpose()) / m.s2;
+      const double det = m.s0 * m.s2 - m.s1 * m.s1;
+      if (a_free && b_free && det > 1e-12 * m.s0 * m.s2 && det > 0.0) {
+        vv -= (m.s2 * tj * tj.transpose() - m.s1 * (tj * uj.transpose() + uj * tj.transpose()) +
+               m.s0 * uj * uj.transpose()) / det;
+      } else if (a_free && m.s0 > 0.0) {
+        vv -= tj * tj.transpose() / m.s0;
+      } else if (b_free && m.s2 > 0.0) {
+        vv -= uj * uj.transpose() / m.s2;
       }
+      *jtj += vv;
     }
-    // Rounding can leave the projected matrix a hair indefinite; the diagonal must not go negative.
+    // Rounding (float sums, then a difference) can leave the projected matrix a hair
+    // indefinite; the diagonal must not go negative (LM's damping takes care of the rest).
     for (int i = 0; i < 3; ++i) (*jtj)(i, i) = std::max((*jtj)(i, i), 0.0);
+    // Ridge residuals sqrt(ridge(k)) b_c: d sqrt(ridge) / dt = -sqrt(ridge) k / (k + 2). A channel
+    // on the energy bound has ridge b_max^2 constant in t: no term.
+    const double ridge = Ridge(k_), dridge_root = -std::sqrt(ridge) * k_ / (k_ + 2.0);
+    for (const ChannelFit& f : fit.channel) {
+      if (f.b <= 0.0 || f.b_at_max) continue;
+      (*jtr)[2] += std::sqrt(ridge) * f.b * dridge_root * f.b;
+      (*jtj)(2, 2) += dridge_root * f.b * dridge_root * f.b;
+    }
     // Prior residuals sqrt(w2) (c - c0) on cx and cy.
     (*jtj)(0, 0) += prior_w2_;
     (*jtj)(1, 1) += prior_w2_;
@@ -311,11 +392,11 @@ class TexelProblem {
  private:
   // Workspace slots: sample data, then scratch.
   enum : int { kAx = 0, kAy, kAz, kE, kL = kE + 3, kE2 = kL + 3, kEL = kE2 + 3, kLogBase = kEL + 3,
-               kG, kD, kMask = kD + 3, kTmp, kTmp2, kSlots };
+               kG, kD, kBase = kD + 3, kTmp, kSlots };
   static_assert(kSlots <= Workspace::kArrays);
   float* Slot(int i) { return p_ + static_cast<size_t>(i) * cap_; }
   const float* Slot(int i) const { return p_ + static_cast<size_t>(i) * cap_; }
-  ArrayMap View(int i) { return ArrayMap(Slot(i), n_); }
+  ArrayMap View(int i) { return ArrayMap(Slot(i), np_); }
   ArrayMap e(int c) { return View(kE + c); }
   ArrayMap L(int c) { return View(kL + c); }
   ArrayMap e2(int c) { return View(kE2 + c); }
@@ -323,15 +404,16 @@ class TexelProblem {
   ArrayMap log_base() { return View(kLogBase); }
   ArrayMap g() { return View(kG); }
   ArrayMap d(int j) { return View(kD + j); }  // dg/dcx, dg/dcy, dg/dt
-  ArrayMap mask() { return View(kMask); }
+  ArrayMap base() { return View(kBase); }
   ArrayMap tmp() { return View(kTmp); }
-  ArrayMap tmp2() { return View(kTmp2); }
 
   float* p_ = nullptr;
   int cap_ = 0;
-  int n_ = 0;
+  int n_ = 0;   // valid samples
+  int np_ = 0;  // padded length of every array, a multiple of kBlock
   int saturated_ = 0;
   double prior_w2_ = 0;
+  double albedo_ridge_ = 0;
   double max_specular_albedo_ = 1;
   double k_ = 1;  // exponent of the current g
   std::array<ChannelSums, 3> sums_;
@@ -347,27 +429,33 @@ struct Bounds {
   }
 };
 
-// Coarse search over k for the mirror lobe: each point is a closed-form solve.
+// Coarse search over k for the mirror lobe: each point is a closed-form solve. The best grid
+// point is refined by the vertex of the parabola (in log k) through it and its neighbours, so
+// LM starts within a fraction of the grid step.
 Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
   problem.SetLobeDirection(kPriorC, kPriorC);
-  Shape best;
-  best.t = bounds.t_lo;
-  double best_cost = std::numeric_limits<double>::infinity();
   const double step = std::log(kGridFactor);
-  const int count = 1 + static_cast<int>(std::ceil((bounds.t_hi - bounds.t_lo) / step - 1e-9));
+  std::array<double, 32> costs{}, ts{};  // log(1e6 / 0.5) / log(4) < 11 points
+  const int count = std::min<int>(costs.size(), 1 + static_cast<int>(std::ceil((bounds.t_hi - bounds.t_lo) / step - 1e-9)));
+  int best = 0;
   for (int i = 0; i < count; ++i) {
-    const double t = std::min(bounds.t_lo + i * step, bounds.t_hi);
-    problem.SetExponent(std::exp(t), false);
+    ts[i] = std::min(bounds.t_lo + i * step, bounds.t_hi);
+    problem.SetExponent(std::exp(ts[i]), false);
     std::array<ChannelSums, 3> sums;
     const LinearFit fit = problem.SolveLinear(&sums);
-    double cost = 0;
-    for (int c = 0; c < 3; ++c) cost += sums[c].ll + QuadraticCost(sums[c], fit.channel[c].a, fit.channel[c].b);
-    if (cost < best_cost) {
-      best_cost = cost;
-      best.t = t;
-    }
+    costs[i] = 0;
+    for (int c = 0; c < 3; ++c) costs[i] += sums[c].ll + QuadraticCost(sums[c], fit.channel[c].a, fit.channel[c].b);
+    if (costs[i] < costs[best]) best = i;
   }
-  return best;
+  Shape init;
+  init.t = ts[best];
+  if (best > 0 && best + 1 < count) {
+    const double h1 = ts[best] - ts[best - 1], h2 = ts[best + 1] - ts[best];
+    const double d1 = (costs[best] - costs[best - 1]) / h1, d2 = (costs[best + 1] - costs[best]) / h2;
+    const double curvature = (d2 - d1) / (0.5 * (h1 + h2));
+    if (curvature > 0.0) init.t = std::clamp(ts[best] - 0.5 * (d1 + d2) / curvature, ts[best - 1], ts[best + 1]);
+  }
+  return init;
 }
 
 struct LobeFitOutcome {
@@ -386,32 +474,13 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
   problem.SetShape(shape, true);
   LinearFit linear = problem.SolveLinear(&sums);
   double sse = problem.Sse(linear);
-  double cost = sse + problem.Prior(shape);
+  double cost = sse + problem.Penalty(shape, linear);
   Eigen::Matrix3d jtj;
   Eigen::Vector3d jtr;
   problem.NormalEquations(linear, sums, shape, &jtj, &jtr);
   double lambda = 1e-4, nu = 2.0;
   int it = 0;
-  static const bool debug = std::getenv("DIGITIZE_BRDF_DEBUG") != nullptr;
   for (; it < max_iterations; ++it) {
-    if (debug) {
-      // numeric gradient of the reduced cost
-      Eigen::Vector3d num;
-      for (int j = 0; j < 3; ++j) {
-        Shape sp = shape, sm = shape;
-        const double h = 1e-4;
-        (j == 0 ? sp.cx : j == 1 ? sp.cy : sp.t) += h;
-        (j == 0 ? sm.cx : j == 1 ? sm.cy : sm.t) -= h;
-        problem.SetShape(sp, false);
-        const double fp = problem.Sse(problem.SolveLinear()) + problem.Prior(sp);
-        problem.SetShape(sm, false);
-        const double fm = problem.Sse(problem.SolveLinear()) + problem.Prior(sm);
-        num[j] = (fp - fm) / (2 * h) / 2;
-      }
-      problem.SetShape(shape, true);
-      std::fprintf(stderr, "it %d cost %.9g lambda %.3g x %.5f %.5f %.5f jtr %.4g %.4g %.4g num %.4g %.4g %.4g diag %.4g %.4g %.4g\n", it, cost, lambda,
-                   shape.cx, shape.cy, shape.t, jtr[0], jtr[1], jtr[2], num[0], num[1], num[2], jtj(0,0), jtj(1,1), jtj(2,2));
-    }
     // Projected-gradient test (as Ceres): the step x - clamp(x - g) vanishes at a bounded optimum.
     const Shape pg = bounds.Clamp({shape.cx - jtr[0], shape.cy - jtr[1], shape.t - jtr[2]});
     const double pg_norm = std::max({std::abs(pg.cx - shape.cx), std::abs(pg.cy - shape.cy), std::abs(pg.t - shape.t)});
@@ -419,35 +488,64 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
       out.converged = true;
       break;
     }
-    // Active set: a parameter on a bound whose gradient pushes it outwards stays there; the
-    // step is solved for the others. (Solving for all and clamping afterwards turns the
-    // clamped component's coupling into a wrong step for the rest, and LM crawls.)
+    // Bounds by an active set plus a truncated step: a parameter on a bound whose gradient or
+    // step pushes outwards is held there and the damped system is solved for the others; the
+    // step is then shortened, as a whole, to the first bound it meets. Clamping each component
+    // instead turns the coupling of a clamped parameter into a wrong step for the others (the
+    // model can even predict an increase), and LM crawls or stops early.
     const double x[3] = {shape.cx, shape.cy, shape.t};
     const double lo[3] = {bounds.c_lo, bounds.c_lo, bounds.t_lo}, hi[3] = {bounds.c_hi, bounds.c_hi, bounds.t_hi};
-    Eigen::Matrix3d a = jtj;
-    Eigen::Vector3d rhs = -jtr;
-    for (int i = 0; i < 3; ++i) {
-      a(i, i) += lambda * std::clamp(jtj(i, i), 1e-6, 1e32);
-      if ((x[i] <= lo[i] && jtr[i] > 0.0) || (x[i] >= hi[i] && jtr[i] < 0.0)) {
-        a.row(i).setZero();
-        a.col(i).setZero();
-        a(i, i) = 1.0;
-        rhs[i] = 0.0;
+    bool held[3];
+    for (int i = 0; i < 3; ++i) held[i] = (x[i] <= lo[i] && jtr[i] > 0.0) || (x[i] >= hi[i] && jtr[i] < 0.0);
+    Eigen::Vector3d step = Eigen::Vector3d::Zero();
+    for (int pass = 0; pass < 3; ++pass) {
+      Eigen::Matrix3d a = jtj;
+      Eigen::Vector3d rhs = -jtr;
+      for (int i = 0; i < 3; ++i) {
+        a(i, i) += lambda * std::clamp(jtj(i, i), 1e-6, 1e32);
+        if (held[i]) {
+          a.row(i).setZero();
+          a.col(i).setZero();
+          a(i, i) = 1.0;
+          rhs[i] = 0.0;
+        }
       }
+      step = a.ldlt().solve(rhs);
+      bool more = false;
+      for (int i = 0; i < 3; ++i)
+        if (!held[i] && ((x[i] <= lo[i] && step[i] < 0.0) || (x[i] >= hi[i] && step[i] > 0.0))) held[i] = more = true;
+      if (!more) break;
     }
-    const Eigen::Vector3d step = a.ldlt().solve(rhs);
     if (!step.allFinite()) {
       out.failed = true;
       break;
     }
-    const Shape trial = bounds.Clamp({shape.cx + step[0], shape.cy + step[1], shape.t + step[2]});
-    const Eigen::Vector3d taken(trial.cx - shape.cx, trial.cy - shape.cy, trial.t - shape.t);
+    double fraction = 1.0;
+    int stop = -1;
+    for (int i = 0; i < 3; ++i) {
+      if (held[i]) continue;
+      if (step[i] == 0.0) continue;
+      const double reach = ((step[i] < 0.0 ? lo[i] : hi[i]) - x[i]) / step[i];  // >= 0
+      if (reach < fraction) {
+        fraction = std::max(0.0, reach);
+        stop = i;
+      }
+    }
+    Eigen::Vector3d taken = fraction * step;
+    for (int i = 0; i < 3; ++i)
+      if (held[i]) taken[i] = 0.0;
+    Shape trial{x[0] + taken[0], x[1] + taken[1], x[2] + taken[2]};
+    if (stop >= 0) {  // land exactly on the bound it met, so it is seen as active next time
+      double* component = stop == 0 ? &trial.cx : stop == 1 ? &trial.cy : &trial.t;
+      *component = step[stop] < 0.0 ? lo[stop] : hi[stop];
+    }
+    trial = bounds.Clamp(trial);
+    taken = Eigen::Vector3d(trial.cx - shape.cx, trial.cy - shape.cy, trial.t - shape.t);
     const double x_norm = std::sqrt(shape.cx * shape.cx + shape.cy * shape.cy + shape.t * shape.t);
     // Cost F = sum r^2; its Gauss-Newton model predicts a decrease of -2 g.d - d.H.d. When even
     // that is below the function tolerance there is nothing left to gain (and the float cost
     // could not resolve it anyway).
     const double predicted = -2.0 * jtr.dot(taken) - taken.dot(jtj * taken);
-    if (debug) std::fprintf(stderr, "  step %.4g %.4g %.4g taken %.4g %.4g %.4g predicted %.4g\n", step[0], step[1], step[2], taken[0], taken[1], taken[2], predicted);
     if (taken.norm() <= kParameterTolerance * (x_norm + kParameterTolerance) ||
         (lambda < 1.0 && predicted <= kFunctionTolerance * cost)) {
       out.converged = true;
@@ -457,7 +555,7 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
     std::array<ChannelSums, 3> trial_sums;
     const LinearFit trial_linear = problem.SolveLinear(&trial_sums);
     const double trial_sse = problem.Sse(trial_linear);
-    const double trial_cost = trial_sse + problem.Prior(trial);
+    const double trial_cost = trial_sse + problem.Penalty(trial, trial_linear);
     if (!std::isfinite(trial_cost)) {
       out.failed = true;
       break;
@@ -546,6 +644,20 @@ struct MirrorLobePriorCost {
   double weight_;
 };
 
+// The specular albedo ridge: A_c = s_c A_max, residual sqrt(ridge) A_c (brdf_fit.h).
+struct SpecularAlbedoPriorCost {
+  explicit SpecularAlbedoPriorCost(double weight) : weight_(weight) {}
+  template <class T>
+  bool operator()(const T* specular_fraction, T* residual) const {
+    for (int c = 0; c < 3; ++c) residual[c] = T(weight_) * specular_fraction[c];
+    return true;
+  }
+  static ceres::CostFunction* Create(double weight) {
+    return new ceres::AutoDiffCostFunction<SpecularAlbedoPriorCost, 3, 3>(new SpecularAlbedoPriorCost(weight));
+  }
+  double weight_;
+};
+
 LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bounds, int max_iterations,
                             double max_albedo) {
   problem.SetShape(shape, false);
@@ -562,6 +674,9 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bo
                         nullptr, rho_d, rho_s, lobe);
   if (problem.prior_w2() > 0.0)
     cp.AddResidualBlock(MirrorLobePriorCost::Create(std::sqrt(problem.prior_w2())), nullptr, lobe);
+  if (problem.albedo_ridge() > 0.0)
+    cp.AddResidualBlock(SpecularAlbedoPriorCost::Create(std::sqrt(problem.albedo_ridge()) * max_albedo), nullptr,
+                        rho_s);
   for (int c = 0; c < 3; ++c) {
     cp.SetParameterLowerBound(rho_d, c, 0.0);
     cp.SetParameterLowerBound(rho_s, c, 0.0);
@@ -656,9 +771,9 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
     out.status = TexelFitStatus::kFailed;  // keeps the diffuse fallback set above
     return out;
   }
-  if (lobe.sse > diffuse_sse) {
-    // Cannot happen for a true minimiser (the diffuse fit is a feasible point); a solver that
-    // ends worse than it is treated as failed rather than trusted.
+  if (lobe.sse > diffuse_sse * (1.0 + 1e-5) + 1e-30) {
+    // Cannot happen for a true minimiser (the diffuse fit is a feasible point with no penalty;
+    // the slack is float rounding of two sums); a solver that ends worse is not trusted.
     out.status = TexelFitStatus::kFailed;
     return out;
   }
@@ -710,6 +825,8 @@ Status BrdfFitOptions::Validate() const {
   if (!(std::isfinite(max_specular_albedo) && max_specular_albedo > 0.0))
     return Error{"max_specular_albedo must be finite and > 0 (fraction of the irradiance), got " +
                  Str(max_specular_albedo)};
+  if (!(std::isfinite(specular_prior_weight) && specular_prior_weight >= 0.0))
+    return Error{"specular_prior_weight must be finite and >= 0 (noise variances), got " + Str(specular_prior_weight)};
   if (!(std::isfinite(lobe_prior_weight) && lobe_prior_weight >= 0.0))
     return Error{"lobe_prior_weight must be finite and >= 0, got " + Str(lobe_prior_weight)};
   if (max_iterations < 1) return Error{"max_iterations must be >= 1, got " + std::to_string(max_iterations)};

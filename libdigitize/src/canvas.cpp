@@ -8,32 +8,36 @@
 //      (frame walls seen obliquely: vertical in the canvas frame even where the per-pixel step is
 //      small, e.g. fine scans). Missing neighbours are replaced by the centre sample, so holes
 //      never create gradients.
-//   3. 4-connected flood fill from the seed over the non-barrier pixels; enclosed islands
-//      (impasto walls, holes, outliers) are added back.
+//   3. Flood fill from the seed over the non-barrier pixels; enclosed islands (impasto walls,
+//      holes, outliers) are added back. A region that is not convex (a frame ring) or too small
+//      is an error suggesting a seed.
 //   4. Robust plane: erode by erode_px, PCA, then trimmed refits (relief above, outliers below).
 //   5. Boundary: the region is peeled by kPeelPx pixels (the growth may have climbed onto the foot
-//      of a wall) and regrown by a strict test: height step < refine_step_mm, second difference
-//      along the growth direction small, and not the foot of a vertical run (a frame wall). This
-//      recovers the ring that Sobel's 3x3 support loses without taking a single wall pixel.
+//      of a wall) and regrown, up to refine_px beyond it, by a strict test: height step <
+//      refine_step_mm, small second differences towards the region, tight ones next to a wall
+//      or a missing sample, and not on the line of a wall's samples. This recovers the ring that
+//      Sobel's 3x3 support loses without taking wall samples (but those within the noise of the
+//      canvas plane, which no test can tell from canvas). Missing samples the region encloses
+//      stay in the mask.
 //   6. Canvas frame: Z = robust normal, X = the in-plane PCA axis closest to scan +X, origin at
 //      the lower-left corner of the mask points' bounding rectangle, height 0 on the plane.
 #include "digitize/canvas.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <string>
-#include <vector>
-
-#include <Eigen/Eigenvalues>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
+#include <string>
+#include <vector>
 
 namespace digitize {
 namespace {
@@ -42,52 +46,58 @@ namespace {
 constexpr float kMaxAbsCoordinateMm = 1e6f;
 // Fewer usable samples than this cannot define a canvas.
 constexpr size_t kMinValidSamples = 100;
-// The growth can include the foot of an oblique wall (one pixel); peel this much before refining.
-constexpr int kPeelPx = 2;
-// The refinement stops when nothing changes, or after this many steps.
-constexpr int kMaxRefineSteps = 100;
-// Wall test: a barrier neighbour (step or steep slope, see GrowableMask) higher or lower by more
-// than kWallRise sample spacings is part of a frame wall; the candidate may then be the wall's foot and must continue the canvas within
-// the noise (kTightSigmas second-difference sigmas, plus kTightFloorMm of relief curvature).
-// Otherwise the second difference may reach max(kRefineCurvatureShare * refine_step_mm,
-// kRefineNoiseSigmas * noise sigma). The noise of a second difference is sqrt(6) sigma.
-constexpr double kWallRise = 0.5;
-constexpr double kTightSigmas = 2.0;
-// Foot of a wall: within kLineSigmas second-difference sigmas (plus kLineFloorShare of a sample
-// spacing) of the line through the next two wall samples.
-constexpr double kLineSigmas = 4.0;
-constexpr double kLineFloorShare = 0.02;
-// ... and only where that run is steep (slope above kLineSlope) and climbs by more than
-// kLineRiseSigmas height-difference sigmas: a barrier run along a frame step on flat canvas is
-// collinear too, but flat.
-constexpr double kLineRiseSigmas = 3.0;
-constexpr double kLineSlope = 0.3;
-// Over a missing sample the extrapolation 3 p(q+2d) - 2 p(q+3d) has sqrt(14 / 6) times the noise.
-constexpr double kFarLineFactor = 1.53;
-constexpr double kTightFloorMm = 0.06;
-constexpr double kRefineCurvatureShare = 0.25;
-constexpr double kRefineNoiseSigmas = 10.0;
+// A grown region filling less of its convex hull than this is not a canvas (a frame ring).
+constexpr double kMinSolidity = 0.6;
+
+// Plane fits use a regular subsample of about this many samples (the rough one of the whole
+// scan, the robust ones of the canvas): their error stays far below the noise's.
+constexpr size_t kRoughSamples = 1000000;
+constexpr size_t kFitSamples = 1000000;
 // Robust refit: iterations, and the lower trim (outliers below the canvas) in multiples of the
 // upper one (relief above).
 constexpr int kTrimIterations = 3;
 constexpr double kLowerTrimFactor = 2.0;
-// Plane fits use a regular subsample of about this many samples (the rough one of the whole
-// scan, the robust ones of the canvas): their error is far below the noise either way.
-constexpr size_t kRoughSamples = 1000000;
-constexpr size_t kFitSamples = 1000000;
-// Samples for medians (MAD, spacings, noise): a regular subsample of about this many pixels.
+// Regular subsamples for medians: residuals (MAD), noise (a MAD to better than 1 %), spacing.
 constexpr size_t kStatSamples = 250000;
-constexpr size_t kNoiseSamples = 100000;   // noise: a MAD to better than 1 %
-constexpr size_t kSpacingSamples = 50000;  // sample spacing: a median
-// A grown region filling less of its convex hull than this is not a canvas (a frame ring).
-constexpr double kMinSolidity = 0.6;
-// In-plane eigenvalues closer than this (relative) leave the axes undefined: use scan +X.
-constexpr double kIsotropicEigen = 0.05;
-// Points farther than this from the plane are not canvas (frames rise 15+ mm): they do not
-// stretch the bounding rectangle (outliers that survived in the mask).
-constexpr double kBoundHeightMm = 15.0;
+constexpr size_t kNoiseSamples = 100000;
+constexpr size_t kSpacingSamples = 50000;
 // MAD -> sigma for a Gaussian.
 constexpr double kMadToSigma = 1.4826;
+
+// Boundary refinement. The growth can include the foot of an oblique wall (one pixel): the
+// region is peeled by kPeelPx first. The refinement runs until nothing changes (at most
+// kMaxRefineSteps) within refine_px of the grown region.
+constexpr int kPeelPx = 2;
+constexpr int kMaxRefineSteps = 100;
+// Missing samples with mask pixels on both sides within this many pixels join the mask.
+constexpr int kConvexReachPx = 3;
+// A candidate next to a wall (a barrier neighbour higher or lower by more than kWallRise sample
+// spacings, or a missing neighbour) may be the wall's foot: its second difference along every
+// region direction must then stay within kTightSigmas second-difference sigmas (sqrt(6) sigma)
+// plus kTightFloorMm of relief curvature. Elsewhere the bound is the larger of
+// kRefineCurvatureShare * refine_step_mm and kRefineNoiseSigmas noise sigmas.
+constexpr double kWallRise = 0.5;
+constexpr double kTightSigmas = 2.0;
+constexpr double kTightFloorMm = 0.06;
+constexpr double kRefineCurvatureShare = 0.25;
+constexpr double kRefineNoiseSigmas = 10.0;
+// Foot test: evenly spaced parallel rays hit a plane in evenly spaced collinear points, so a
+// candidate within kLineSigmas second-difference sigmas (plus kLineFloorShare of a spacing) of
+// the line through the next two barrier samples is on that wall; only where the run is steep
+// (slope above kLineSlope) and climbs by more than kLineRiseSigmas height-difference sigmas: a
+// barrier run along a frame step on flat canvas is collinear too, but flat. Over a missing
+// sample the extrapolation 3 p(q+2d) - 2 p(q+3d) has sqrt(14 / 6) times the noise.
+constexpr double kLineSigmas = 4.0;
+constexpr double kLineFloorShare = 0.02;
+constexpr double kLineRiseSigmas = 3.0;
+constexpr double kLineSlope = 0.3;
+constexpr double kFarLineFactor = 1.53;
+
+// Canvas frame: in-plane eigenvalues closer than this (relative) leave the axes undefined (use
+// scan +X); points farther than kBoundHeightMm from the plane are not canvas (frames rise 15+
+// mm) and do not stretch the bounding rectangle (outliers that survived in the mask).
+constexpr double kIsotropicEigen = 0.05;
+constexpr double kBoundHeightMm = 15.0;
 
 inline bool Usable(const Vec3f& p) {
   return std::fabs(p.x()) <= kMaxAbsCoordinateMm && std::fabs(p.y()) <= kMaxAbsCoordinateMm &&
@@ -225,7 +235,6 @@ double Mad(const std::vector<double>& v, double center) {
   for (size_t i = 0; i < v.size(); ++i) d[i] = std::fabs(v[i] - center);
   return Median(d);
 }
-
 
 // Heights and in-plane coordinates of a plane frame (float: used per pixel in hot loops).
 struct LocalFrame {
@@ -455,7 +464,8 @@ bool FindSeed(const cv::Mat& growable, int cx, int cy, int* sx, int* sy) {
       const uint8_t* row = growable.ptr<uint8_t>(y);
       for (int x = cx - r; x <= cx + r; x += edge_row ? 1 : 2 * r) {
         if (x >= 0 && x < w && row[x]) {
-          const long d = static_cast<long>(x - cx) * (x - cx) + static_cast<long>(y - cy) * (y - cy);
+          const long d =
+              static_cast<long>(x - cx) * (x - cx) + static_cast<long>(y - cy) * (y - cy);
           if (d < best) {
             best = d;
             *sx = x;
@@ -570,8 +580,8 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
                  std::to_string(w) + "x" + std::to_string(h) + " scan (at least " +
                  std::to_string(kMinValidSamples) + " needed to find a canvas)"};
   if (!(rough.eigenvalues(1) > 1e-9 * rough.eigenvalues(0)) || !(rough.eigenvalues(0) > 0))
-    return Error{src + ": the valid samples are (nearly) collinear; a " + std::to_string(w) +
-                 "x" + std::to_string(h) + " scan does not span a canvas plane"};
+    return Error{src + ": the valid samples are (nearly) collinear; a " + std::to_string(w) + "x" +
+                 std::to_string(h) + " scan does not span a canvas plane"};
 
   // ---- 2. Barrier mask.
   cv::Mat grow, valid;
@@ -586,8 +596,8 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
                  "x" + std::to_string(h) + " scan"};
   int sx = -1, sy = -1;
   if (!FindSeed(grow, cx, cy, &sx, &sy))
-    return Error{src + ": no valid sample with a low gradient near the seed " +
-                 PointText(cx, cy) + "; nothing to grow the canvas from"};
+    return Error{src + ": no valid sample with a low gradient near the seed " + PointText(cx, cy) +
+                 "; nothing to grow the canvas from"};
   const int grown = cv::floodFill(grow, cv::Point(sx, sy), cv::Scalar(2), nullptr, cv::Scalar(0),
                                   cv::Scalar(0), 8);
   cv::Mat region;
@@ -607,11 +617,10 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   const size_t filled_px = static_cast<size_t>(grown) + islands_px;
   if (static_cast<double>(filled_px) <
       options.min_canvas_fraction * static_cast<double>(valid_count))
-    return Error{src + ": the region grown from seed " + seed_text + " covers " +
-                 std::to_string(filled_px) + " px, less than " +
-                 std::to_string(options.min_canvas_fraction * 100) + " % of the " +
-                 std::to_string(valid_count) + " valid samples (seed on the frame or a speck?)" +
-                 seed_hint};
+    return Error{
+        src + ": the region grown from seed " + seed_text + " covers " + std::to_string(filled_px) +
+        " px, less than " + std::to_string(options.min_canvas_fraction * 100) + " % of the " +
+        std::to_string(valid_count) + " valid samples (seed on the frame or a speck?)" + seed_hint};
   // A canvas seen by a scanner is convex (a rectangle, an oval; occlusion by the frame cuts it
   // along straight lines). A region grown on the frame is a ring or a part of one: it fills a
   // small share of its convex hull.
@@ -638,15 +647,17 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     const int stride = SampleStride(fit_mask_count, kFitSamples);
     const int rows_sampled = (h + stride - 1) / stride;
     std::vector<std::vector<Vec3f>> per_row(static_cast<size_t>(rows_sampled));
-    tbb::parallel_for(tbb::blocked_range<int>(0, rows_sampled), [&](const tbb::blocked_range<int>& r) {
-      for (int i = r.begin(); i < r.end(); ++i) {
-        const int y = i * stride;
-        const uint8_t* m = fit_mask.ptr<uint8_t>(y);
-        const Vec3f* row = xyz.Row(y);
-        for (int x = 0; x < w; x += stride)
-          if (m[x] && Usable(row[x])) per_row[static_cast<size_t>(i)].push_back(row[x]);
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows_sampled),
+                      [&](const tbb::blocked_range<int>& r) {
+                        for (int i = r.begin(); i < r.end(); ++i) {
+                          const int y = i * stride;
+                          const uint8_t* m = fit_mask.ptr<uint8_t>(y);
+                          const Vec3f* row = xyz.Row(y);
+                          for (int x = 0; x < w; x += stride)
+                            if (m[x] && Usable(row[x]))
+                              per_row[static_cast<size_t>(i)].push_back(row[x]);
+                        }
+                      });
     size_t total = 0;
     for (const auto& v : per_row) total += v.size();
     fit_points.reserve(total);
@@ -656,7 +667,6 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   if (plane.count < 3)
     return Error{src + ": too few canvas samples (" + std::to_string(plane.count) +
                  ") to fit the canvas plane"};
-  
   const size_t residual_step = std::max<size_t>(1, fit_points.size() / kStatSamples);
   for (int it = 0; it < kTrimIterations; ++it) {
     const Eigen::Vector3f c = plane.centroid.cast<float>(), n = plane.axes.col(2).cast<float>();
@@ -717,8 +727,8 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   if (cv::countNonZero(core) == 0) core = filled.clone();
   const double spacing_x = MedianSpacing(xyz, core, frame, 1, 0, fit_mask_count);
   const double spacing_y = MedianSpacing(xyz, core, frame, 0, 1, fit_mask_count);
-  const double tol_loose = std::max(kRefineCurvatureShare * options.refine_step_mm,
-                                    kRefineNoiseSigmas * noise_sigma);
+  const double tol_loose =
+      std::max(kRefineCurvatureShare * options.refine_step_mm, kRefineNoiseSigmas * noise_sigma);
   const double tol_tight = kTightSigmas * std::sqrt(6.0) * noise_sigma + kTightFloorMm;
   const float tol_line = static_cast<float>(kLineSigmas * std::sqrt(6.0) * noise_sigma +
                                             kLineFloorShare * std::min(spacing_x, spacing_y));
@@ -750,8 +760,8 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
         wall_next = wall_next || !in[idx(x1, y1)];
         // The same foot test one step further (q = 3 p(q+2d) - 2 p(q+3d)).
         const int x2 = x1 + kDx[d], y2 = y1 + kDy[d], x3 = x2 + kDx[d], y3 = y2 + kDy[d];
-        if (!inside(x3, y3) || !usable_at(x2, y2) || !usable_at(x3, y3) ||
-            grow.ptr<uint8_t>(y2)[x2] != 0 || grow.ptr<uint8_t>(y3)[x3] != 0)
+        if (!inside(x3, y3) || !usable_at(x2, y2) || !usable_at(x3, y3) || in[idx(x2, y2)] ||
+            in[idx(x3, y3)])
           continue;
         const Vec3f& p2 = xyz(x2, y2);
         const Vec3f& p3 = xyz(x3, y3);
@@ -763,17 +773,18 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
         if ((pq - 3.0f * p2 + 2.0f * p3).norm() < kFarLineFactor * tol_line) return false;
         continue;
       }
-      if (grow.ptr<uint8_t>(y1)[x1] != 0) continue;
+      if (in[idx(x1, y1)]) continue;
       const int x2 = x1, y2 = y1;
       const Vec3f& p2 = xyz(x2, y2);
       const float h2 = frame.H(p2);
-      wall_next = wall_next || std::fabs(h2 - hq) > kWallRise * spacing;
+      const bool barrier = grow.ptr<uint8_t>(y2)[x2] == 0;
+      wall_next = wall_next || (barrier && std::fabs(h2 - hq) > kWallRise * spacing);
       // Foot test: samples of parallel, evenly spaced rays on a plane are evenly spaced on a
-      // line, so q is on the wall when it continues the run of barrier samples q + 2d, q + d.
-      // A canvas sample before the wall misses that point by (its distance to the wall) /
-      // sin(view angle).
+      // line, so q is on the wall when it continues the steep run q + 2d, q + d outside the
+      // region (a wall's lowest samples need not be barriers when the rest is missing). A canvas
+      // sample before the wall misses that point by (its distance to the wall) / sin(view angle).
       const int x3 = x2 + kDx[d], y3 = y2 + kDy[d];
-      if (!inside(x3, y3) || !usable_at(x3, y3) || grow.ptr<uint8_t>(y3)[x3] != 0) continue;
+      if (!inside(x3, y3) || !usable_at(x3, y3) || in[idx(x3, y3)]) continue;
       const Vec3f& p3 = xyz(x3, y3);
       const float rise = std::fabs(frame.H(p3) - h2);
       if (!(rise > rise_line && rise > kLineSlope * (frame.UV(p3) - frame.UV(p2)).norm())) continue;
@@ -805,7 +816,7 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     cv::bitwise_xor(ring, mask, ring);
     frontier = NonZeroIndices(ring);
   }
-  std::vector<int> accepted, missing_edge;
+  std::vector<int> accepted;
   // The refinement may reach refine_px beyond the grown region; within that band it runs to
   // convergence (paths around missing samples are longer than the distance).
   cv::Mat band;
@@ -816,10 +827,7 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     for (int q : frontier) {
       const int qx = q % w, qy = q / w;
       if (in[idx(qx, qy)] || !in_band[q]) continue;
-      if (!usable_at(qx, qy)) {
-        missing_edge.push_back(q);
-        continue;
-      }
+      if (!usable_at(qx, qy)) continue;
       if (accept(qx, qy)) accepted.push_back(q);
     }
     for (int q : accepted) in[static_cast<size_t>(q)] = 255;
@@ -832,36 +840,31 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       }
     }
   }
-  // Missing pixels on the boundary whose opposite neighbours are both canvas: the canvas as seen
-  // by the scanner is convex along rows and columns, so they are canvas too.
-  for (int pass = 0; pass < 2; ++pass) {
-    std::vector<int> add;
-    for (int q : missing_edge) {
-      const int qx = q % w, qy = q / w;
-      if (in[idx(qx, qy)]) continue;
-      const bool row = qx > 0 && qx + 1 < w && in[idx(qx - 1, qy)] && in[idx(qx + 1, qy)];
-      const bool col = qy > 0 && qy + 1 < h && in[idx(qx, qy - 1)] && in[idx(qx, qy + 1)];
-      if (row || col) add.push_back(q);
-    }
-    for (int q : add) in[static_cast<size_t>(q)] = 255;
-    if (add.empty()) break;
-    // Their missing neighbours become candidates too.
-    for (int q : add) {
-      const int qx = q % w, qy = q / w;
-      for (int d = 0; d < 4; ++d) {
-        const int nx = qx + kDx[d], ny = qy + kDy[d];
-        if (inside(nx, ny) && !in[idx(nx, ny)] && !usable_at(nx, ny))
-          missing_edge.push_back(ny * w + nx);
-      }
-    }
-  }
-  // Missing samples the grown region enclosed stay canvas (the truth behind a dropout is the
-  // surface around it); then everything the final mask encloses.
+  // Missing samples: those the grown region enclosed stay canvas (the truth behind a dropout is
+  // the surface around it), and so do those with mask pixels on both sides along a row or a
+  // column within kConvexReachPx (the canvas as the scanner sees it is convex); then everything
+  // the final mask encloses.
   cv::Mat final_mask = mask;
   {
-    cv::Mat enclosed_missing;
-    cv::bitwise_and(filled, 1 - valid, enclosed_missing);  // valid is 0 / 1
-    final_mask.setTo(255, enclosed_missing);
+    cv::Mat missing;
+    cv::compare(valid, 0, missing, cv::CMP_EQ);
+    cv::Mat add;
+    cv::bitwise_and(filled, missing, add);
+    final_mask.setTo(255, add);
+    auto reach = [&](int kw, int kh, cv::Point anchor) {
+      cv::Mat out;
+      cv::dilate(final_mask, out, cv::Mat::ones(kh, kw, CV_8U), anchor, 1, cv::BORDER_CONSTANT,
+                 cv::Scalar(0));
+      return out;
+    };
+    const int r = kConvexReachPx;
+    cv::Mat left = reach(r + 1, 1, cv::Point(r, 0)), right = reach(r + 1, 1, cv::Point(0, 0));
+    cv::Mat up = reach(1, r + 1, cv::Point(0, r)), down = reach(1, r + 1, cv::Point(0, 0));
+    cv::bitwise_and(left, right, left);
+    cv::bitwise_and(up, down, up);
+    cv::bitwise_or(left, up, add);
+    cv::bitwise_and(add, missing, add);
+    final_mask.setTo(255, add);
     const cv::Mat holes = EnclosedIslands(final_mask);
     cv::bitwise_or(final_mask, holes, final_mask);
   }
@@ -892,7 +895,7 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   struct Box {
     double x0 = std::numeric_limits<double>::max(), y0 = std::numeric_limits<double>::max();
     double x1 = std::numeric_limits<double>::lowest(), y1 = std::numeric_limits<double>::lowest();
-    size_t count = 0;              // points in the rectangle
+    size_t count = 0;                 // points in the rectangle
     size_t mask_px = 0, kept_px = 0;  // mask pixels; of those, in the grown + filled region
   };
   // Bounding rectangle of the mask points, the output mask and its counts in one parallel pass.

@@ -16,7 +16,6 @@
 #include <mutex>
 #include <new>
 #include <nlohmann/json.hpp>
-#include <set>
 #include <sstream>
 #include <string>
 #include <string_view>

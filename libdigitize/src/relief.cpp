@@ -53,6 +53,7 @@ Status ReliefOptions::Validate() const {
   if (cell_px < 1) return Error{"cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!(std::isfinite(noise_margin_mm) && noise_margin_mm >= 0.0))
     return Error{"noise_margin_mm must be a finite height >= 0 mm, got " + Str(noise_margin_mm)};
+  if (cover_px < 0) return Error{"cover_px must be >= 0 texels, got " + std::to_string(cover_px)};
   if (!(std::isfinite(min_relief_mm) && min_relief_mm >= 0.0))
     return Error{"min_relief_mm must be a finite height >= 0 mm, got " + Str(min_relief_mm)};
   return Status::Ok();
@@ -148,35 +149,46 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
     (keep[l] ? result.components_kept : result.components_removed)++;
   }
 
+  // Mv after speck removal.
+  std::vector<size_t> above_count(h, 0);
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y < rows.end(); ++y) {
+      const int32_t* lr = labels.ptr<int32_t>(y);
+      uint8_t* vr = result.valid.Row(y);
+      size_t count = 0;
+      for (int x = 0; x < w; ++x) count += (vr[x] = keep[lr[x]]);
+      above_count[y] = count;
+    }
+  });
+  // Boxes cover Mv grown by cover_px texels: a true surface above delta0 that falls between texel
+  // centres, or just under the threshold through resampling, is still inside a box.
+  cv::Mat valid_mat(h, w, CV_8U, result.valid.data.data());
+  cv::Mat cover;  // a new buffer: dilating into a header of valid_mat would overwrite Mv
+  if (options.cover_px > 0)
+    cv::dilate(valid_mat, cover, cv::Mat(), cv::Point(-1, -1), options.cover_px);
+  else
+    cover = valid_mat;
+
   std::vector<std::vector<ReliefBox>> row_boxes(cells_y);
-  std::vector<size_t> above_count(cells_y, 0);
   tbb::parallel_for(tbb::blocked_range<int>(0, cells_y), [&](const tbb::blocked_range<int>& crows) {
     std::vector<uint8_t> cell_has(cells_x);
     for (int cy = crows.begin(); cy < crows.end(); ++cy) {
       std::fill(cell_has.begin(), cell_has.end(), 0);
       const int y0 = cy * n, y1 = static_cast<int>(std::min<int64_t>(int64_t{y0} + n, h));
-      size_t count = 0;
       for (int y = y0; y < y1; ++y) {
-        const int32_t* lr = labels.ptr<int32_t>(y);
-        uint8_t* vr = result.valid.Row(y);
+        const uint8_t* cr = cover.ptr<uint8_t>(y);
         for (int cx = 0, x0 = 0; cx < cells_x; ++cx, x0 += n) {
           const int x1 = static_cast<int>(std::min<int64_t>(int64_t{x0} + n, w));
           uint8_t any = 0;
-          for (int x = x0; x < x1; ++x) {
-            const uint8_t v = keep[lr[x]];
-            vr[x] = v;
-            count += v;
-            any |= v;
-          }
+          for (int x = x0; x < x1; ++x) any |= cr[x];
           cell_has[cx] |= any;
         }
       }
-      above_count[cy] = count;
       const CellPeak* row_peaks = peaks.data() + static_cast<size_t>(cy) * cells_x;
       for (int cx = 0; cx < cells_x; ++cx) {
         if (!cell_has[cx]) continue;
         const CellPeak& p = row_peaks[cx];
-        DIGITIZE_CHECK(p.u >= 0, "ClassifyRelief: a cell with relief has no texel with height");
+        if (p.u < 0) continue;  // the grown cover reached a cell without any height: nothing to box
         ReliefBox box;
         box.x0 = cx * n;
         box.y0 = y0;

@@ -1,32 +1,34 @@
 // Resampling onto the canvas grid (resample.h).
 //
-// 1. Canvas samples (mask & usable) go to the canvas frame, then to continuous texel coordinates
-//    (texel centres at integers; height_field.h's row flip).
+// 1. Canvas samples (mask & usable) go to continuous texel coordinates of the canvas frame
+//    (texel centres at integers; height_field.h's row flip), per chunk of a row when drawn.
 // 2. Per scan quad: which of its (at most two) triangles are drawn. Four valid corners: split
 //    along the shorter 3D diagonal; three: the one triangle they make; any edge longer than the
 //    edge limit: that triangle is skipped (it spans a step or a gap).
 // 3. Rasterisation, race-free: the output rows are cut into bands; every chunk of kChunk quads of
 //    a scan row is listed in the bands its texel-row range meets, and each band (one task) draws
 //    only its own rows. Linear (barycentric) interpolation; overlaps keep the highest.
-// 4. Holes: the canvas outline is the covered texels closed by a few texels (the outline is a
-//    convex quadrilateral, which closing preserves) plus everything it encloses. Uncovered texels
-//    inside are holes: connected components, filled by push-pull interpolation relaxed towards a
-//    harmonic (membrane) fill, each component in its own task; small ones kFilled, large ones
-//    kUnfilled.
+// 4. Holes. The canvas outline is the footprint of the mask's quads (a missing corner predicted
+//    from its quad's parallelogram or a quadratic pixel -> texel map) plus everything it
+//    encloses; uncovered texels inside are holes. A connected hole up to max_hole_area_mm2 is
+//    small; a larger one is split: texels farther from measured ones than the radius of a disc
+//    of that area are cores of large holes, and everything within that radius of a core is
+//    large (kUnfilled), the rest small (kFilled). Every hole is filled by push-pull interpolation
+//    relaxed towards a membrane (harmonic) fill, one component per task.
 #include "digitize/resample.h"
 
-#include <algorithm>
-#include <cmath>
-#include <limits>
-#include <string>
-#include <vector>
-
-#include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
 
 namespace digitize {
 namespace {
@@ -36,9 +38,11 @@ constexpr int kChunk = 32;                   // quads per chunk of a scan row (r
 constexpr int kBandRows = 32;                // output rows per rasteriser task
 constexpr float kBaryEps = 1e-5f;            // texel centres on a shared edge go to both sides
 constexpr size_t kStatSamples = 50000;       // subsample size for the median spacing
-constexpr size_t kMapSamples = 20000;        // samples fitting the pixel -> texel map
-constexpr int kMaxRelaxIterations = 200;     // membrane relaxation of a filled hole
-constexpr int kUnfilledRelaxIterations = 20; // large holes: continuity only
+constexpr double kPi = 3.14159265358979323846;
+constexpr size_t kMapSamples = 20000;         // samples fitting the pixel -> texel map
+constexpr int kMaxRelaxIterations = 200;      // membrane relaxation of a filled hole
+constexpr int kUnfilledRelaxIterations = 20;  // large holes: continuity only
+constexpr float kRelaxToleranceMm = 1e-5f;    // relaxation stops below this change per sweep
 constexpr float kLowest = std::numeric_limits<float>::lowest();
 
 inline bool Usable(const Vec3f& p) {
@@ -112,8 +116,15 @@ struct TriangleSetup {
   float ax = 0, ay = 0, ah = 0, e1x = 0, e1y = 0, e2x = 0, e2y = 0, inv = 0, dh1 = 0, dh2 = 0;
   TriangleSetup() = default;
   TriangleSetup(const TexelPoint& a, const TexelPoint& b, const TexelPoint& c)
-      : ax(a.x), ay(a.y), ah(a.h), e1x(b.x - a.x), e1y(b.y - a.y), e2x(c.x - a.x), e2y(c.y - a.y),
-        dh1(b.h - a.h), dh2(c.h - a.h) {
+      : ax(a.x),
+        ay(a.y),
+        ah(a.h),
+        e1x(b.x - a.x),
+        e1y(b.y - a.y),
+        e2x(c.x - a.x),
+        e2y(c.y - a.y),
+        dh1(b.h - a.h),
+        dh2(c.h - a.h) {
     const float area = e1x * e2y - e2x * e1y;
     inv = std::fabs(area) > 1e-12f ? 1.0f / area : 0.f;  // degenerate: never inside
   }
@@ -121,8 +132,8 @@ struct TriangleSetup {
     const float px = static_cast<float>(i) - ax, py = static_cast<float>(j) - ay;
     const float wb = (px * e2y - e2x * py) * inv;
     const float wc = (e1x * py - px * e1y) * inv;
-    const bool in = (wb >= -kBaryEps) & (wc >= -kBaryEps) & (wb + wc <= 1.0f + kBaryEps) &
-                    (inv != 0.f);
+    const bool in =
+        (wb >= -kBaryEps) & (wc >= -kBaryEps) & (wb + wc <= 1.0f + kBaryEps) & (inv != 0.f);
     const float value = ah + wb * dh1 + wc * dh2;
     return in ? value : kLowest;
   }
@@ -194,9 +205,10 @@ cv::Mat EnclosedIslands(const cv::Mat& mask) {
 
 // Scratch space of the hole filler, one per thread (no per-hole allocation in steady state).
 struct FillScratch {
-  std::vector<float> val, wt;       // pyramid levels, concatenated
+  std::vector<float> val, wt;  // pyramid levels, concatenated
   std::vector<int> level_offset, level_w, level_h;
-  std::vector<uint8_t> role;         // level-0 role: 0 ignore, 1 known, 2 unknown
+  std::vector<uint8_t> role;      // level-0 role: 0 ignore, 1 known, 2 unknown
+  std::vector<uint32_t> unknown;  // level-0 unknown texels with a neighbour
 };
 
 // Fills the texels labelled `label` inside rect (which has a one-texel margin) from the covered
@@ -304,26 +316,33 @@ void FillHole(const cv::Rect& rect, int label, const cv::Mat& labels, const cv::
         v[i] = static_cast<float>((1 - ay) * top_v + ay * bot_v);
       }
   }
-  // Relax: unknown texels towards the mean of their known / unknown 4-neighbours.
+  // Relax: unknown texels towards the mean of their known / unknown 4-neighbours (Gauss-Seidel
+  // over the list of unknown texels, each with its neighbour count).
   float* v = s.val.data();
+  s.unknown.clear();
+  for (int y = 0; y < bh; ++y)
+    for (int x = 0; x < bw; ++x) {
+      const size_t i = static_cast<size_t>(y) * bw + x;
+      if (s.role[i] != 2) continue;
+      const int n = (x > 0 && s.role[i - 1]) + (x + 1 < bw && s.role[i + 1]) +
+                    (y > 0 && s.role[i - bw]) + (y + 1 < bh && s.role[i + bw]);
+      if (n > 0) s.unknown.push_back(static_cast<uint32_t>(i));
+    }
   for (int it = 0; it < iterations; ++it) {
     float change = 0;
-    for (int y = 0; y < bh; ++y)
-      for (int x = 0; x < bw; ++x) {
-        const size_t i = static_cast<size_t>(y) * bw + x;
-        if (s.role[i] != 2) continue;
-        float sum = 0;
-        int n = 0;
-        if (x > 0 && s.role[i - 1]) sum += v[i - 1], ++n;
-        if (x + 1 < bw && s.role[i + 1]) sum += v[i + 1], ++n;
-        if (y > 0 && s.role[i - bw]) sum += v[i - bw], ++n;
-        if (y + 1 < bh && s.role[i + bw]) sum += v[i + bw], ++n;
-        if (n == 0) continue;
-        const float next = sum / n;
-        change = std::max(change, std::fabs(next - v[i]));
-        v[i] = next;
-      }
-    if (change < 1e-5f) break;
+    for (const uint32_t i : s.unknown) {
+      const int x = static_cast<int>(i % bw), y = static_cast<int>(i / bw);
+      float sum = 0;
+      int n = 0;
+      if (x > 0 && s.role[i - 1]) sum += v[i - 1], ++n;
+      if (x + 1 < bw && s.role[i + 1]) sum += v[i + 1], ++n;
+      if (y > 0 && s.role[i - bw]) sum += v[i - bw], ++n;
+      if (y + 1 < bh && s.role[i + bw]) sum += v[i + bw], ++n;
+      const float next = sum / static_cast<float>(n);
+      change = std::max(change, std::fabs(next - v[i]));
+      v[i] = next;
+    }
+    if (change < kRelaxToleranceMm) break;
   }
   write_back();
 }
@@ -352,8 +371,8 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   if (xyz.empty()) return Error{src + ": empty scan"};
   if (canvas.mask_scan.width != sw || canvas.mask_scan.height != sh)
     return Error{src + ": canvas mask is " + std::to_string(canvas.mask_scan.width) + "x" +
-                 std::to_string(canvas.mask_scan.height) + ", scan is " + std::to_string(sw) +
-                 "x" + std::to_string(sh)};
+                 std::to_string(canvas.mask_scan.height) + ", scan is " + std::to_string(sw) + "x" +
+                 std::to_string(sh)};
   const Mat3d& rot = canvas.canvas_from_scan.rotation;
   const Vec3d& trans = canvas.canvas_from_scan.translation;
   if (!rot.allFinite() || !trans.allFinite() ||
@@ -486,8 +505,8 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
     return b;
   };
   {
-    const int stride = std::max(
-        1, static_cast<int>(std::sqrt(static_cast<double>(count) / kMapSamples)));
+    const int stride =
+        std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count) / kMapSamples)));
     Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 2> atb = Eigen::Matrix<double, 6, 2>::Zero();
     size_t n = 0;
@@ -595,7 +614,8 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
               const int j0 = std::max(row0, CeilFrom(miny)), j1 = std::min(row1, FloorFrom(maxy));
               if (i0 > i1 || j0 > j1) continue;
               TriangleSetup setup[2];
-              for (int t = 0; t < ntri; ++t) setup[t] = TriangleSetup(*tri[t][0], *tri[t][1], *tri[t][2]);
+              for (int t = 0; t < ntri; ++t)
+                setup[t] = TriangleSetup(*tri[t][0], *tri[t][1], *tri[t][2]);
               for (int j = j0; j <= j1; ++j) {
                 float* row = out + static_cast<size_t>(j) * w;
                 for (int i = i0; i <= i1; ++i) {
@@ -628,38 +648,77 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   cv::Mat inside;
   cv::bitwise_or(covered, cv::Mat(h, w, CV_8U, footprint.data.data()), inside);
   cv::bitwise_or(inside, EnclosedIslands(inside), inside);
-  Grid<uint8_t>().data.swap(footprint.data);
+  std::vector<uint8_t>().swap(footprint.data);
   cv::Mat holes;
   cv::bitwise_and(inside, ~covered, holes);
   cv::Mat labels, comp_stats, centroids;
-  const int ncomp = cv::connectedComponentsWithStats(holes, labels, comp_stats, centroids, 8,
-                                                     CV_32S);
-  holes.release();
+  const int ncomp =
+      cv::connectedComponentsWithStats(holes, labels, comp_stats, centroids, 8, CV_32S);
+  // Small holes: components of at most max_hole_area_mm2. Larger components are split: texels
+  // farther from measured ones than the radius r of a disc of that area are the cores of large
+  // holes, and everything within r of a core belongs to that large hole (kUnfilled); the rest is
+  // small gaps (kFilled), e.g. many scattered dropouts joined into one network of thin gaps.
   const double texel_area = pitch * pitch;
-  std::vector<uint8_t> comp_filled(static_cast<size_t>(std::max(ncomp, 1)), 0);
-  size_t holes_filled = 0, holes_unfilled = 0;
-  for (int k = 1; k < ncomp; ++k) {
-    const double area_mm2 = comp_stats.at<int>(k, cv::CC_STAT_AREA) * texel_area;
-    comp_filled[static_cast<size_t>(k)] = area_mm2 <= options.max_hole_area_mm2;
-    (comp_filled[static_cast<size_t>(k)] ? holes_filled : holes_unfilled)++;
+  const double thin_radius_tx = std::sqrt(options.max_hole_area_mm2 / kPi) / pitch;
+  auto comp_rect = [&](int k) {
+    cv::Rect rect(comp_stats.at<int>(k, cv::CC_STAT_LEFT) - 1,
+                  comp_stats.at<int>(k, cv::CC_STAT_TOP) - 1,
+                  comp_stats.at<int>(k, cv::CC_STAT_WIDTH) + 2,
+                  comp_stats.at<int>(k, cv::CC_STAT_HEIGHT) + 2);
+    return rect & cv::Rect(0, 0, w, h);
+  };
+  // Per component: 1 = small (all kFilled), 0 = has large-hole texels (see `large`).
+  std::vector<uint8_t> comp_filled(static_cast<size_t>(std::max(ncomp, 1)), 1);
+  bool any_large_component = false;
+  for (int k = 1; k < ncomp; ++k)
+    if (comp_stats.at<int>(k, cv::CC_STAT_AREA) * texel_area > options.max_hole_area_mm2)
+      any_large_component = true;
+  cv::Mat large;  // 255: texel of a large hole
+  if (any_large_component) {
+    cv::Mat distance, core;
+    cv::distanceTransform(~covered, distance, cv::DIST_L2, cv::DIST_MASK_3, CV_32F);
+    cv::compare(distance, thin_radius_tx, core, cv::CMP_GT);
+    cv::bitwise_and(core, holes, core);
+    // Cores only in components larger than the area limit.
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& r) {
+      for (int y = r.begin(); y < r.end(); ++y) {
+        const int* lab = labels.ptr<int>(y);
+        uint8_t* c = core.ptr<uint8_t>(y);
+        for (int x = 0; x < w; ++x)
+          if (c[x] && comp_stats.at<int>(lab[x], cv::CC_STAT_AREA) * texel_area <=
+                          options.max_hole_area_mm2)
+            c[x] = 0;
+      }
+    });
+    if (cv::countNonZero(core) > 0) {
+      cv::distanceTransform(~core, distance, cv::DIST_L2, cv::DIST_MASK_3, CV_32F);
+      cv::compare(distance, thin_radius_tx + 0.5, large, cv::CMP_LE);
+      cv::bitwise_and(large, holes, large);
+      for (int y = 0; y < h; ++y) {
+        const int* lab = labels.ptr<int>(y);
+        const uint8_t* l = large.ptr<uint8_t>(y);
+        for (int x = 0; x < w; ++x)
+          if (l[x]) comp_filled[static_cast<size_t>(lab[x])] = 0;
+      }
+    }
   }
+  holes.release();
+  size_t holes_filled = 0, holes_unfilled = 0;
+  for (int k = 1; k < ncomp; ++k)
+    (comp_filled[static_cast<size_t>(k)] ? holes_filled : holes_unfilled)++;
   tbb::enumerable_thread_specific<FillScratch> scratch;
-  tbb::parallel_for(tbb::blocked_range<int>(1, std::max(ncomp, 1), 64),
-                    [&](const tbb::blocked_range<int>& r) {
-                      FillScratch& s = scratch.local();
-                      for (int k = r.begin(); k < r.end(); ++k) {
-                        cv::Rect rect(comp_stats.at<int>(k, cv::CC_STAT_LEFT) - 1,
-                                      comp_stats.at<int>(k, cv::CC_STAT_TOP) - 1,
-                                      comp_stats.at<int>(k, cv::CC_STAT_WIDTH) + 2,
-                                      comp_stats.at<int>(k, cv::CC_STAT_HEIGHT) + 2);
-                        rect &= cv::Rect(0, 0, w, h);
-                        const int iters = comp_filled[static_cast<size_t>(k)]
-                                              ? std::min(kMaxRelaxIterations,
-                                                         4 * std::max(rect.width, rect.height))
-                                              : kUnfilledRelaxIterations;
-                        FillHole(rect, k, labels, covered, out, w, iters, s);
-                      }
-                    });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(1, std::max(ncomp, 1), 64), [&](const tbb::blocked_range<int>& r) {
+        FillScratch& s = scratch.local();
+        for (int k = r.begin(); k < r.end(); ++k) {
+          const cv::Rect rect = comp_rect(k);
+          const int iters =
+              comp_filled[static_cast<size_t>(k)]
+                  ? std::min(kMaxRelaxIterations, 4 * std::max(rect.width, rect.height))
+                  : kUnfilledRelaxIterations;
+          FillHole(rect, k, labels, covered, out, w, iters, s);
+        }
+      });
 
   // ---- 5. States; outside texels at height 0; never NaN.
   struct StateCounts {
@@ -672,6 +731,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
           const uint8_t* cov = covered.ptr<uint8_t>(y);
           const uint8_t* ins = inside.ptr<uint8_t>(y);
           const int* lab = labels.ptr<int>(y);
+          const uint8_t* large_row = large.empty() ? nullptr : large.ptr<uint8_t>(y);
           float* hrow = field.height_mm.Row(y);
           TexelState* st = field.state.Row(y);
           for (int x = 0; x < w; ++x) {
@@ -679,7 +739,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
               st[x] = TexelState::kMeasured;
               ++c.measured;
             } else if (ins[x] && lab[x] > 0) {
-              const bool small = comp_filled[static_cast<size_t>(lab[x])] != 0;
+              const bool small = large_row == nullptr || !large_row[x];
               st[x] = small ? TexelState::kFilled : TexelState::kUnfilled;
               ++(small ? c.filled : c.unfilled);
             } else {

@@ -27,6 +27,12 @@
 // mirror lobe instead of leaving them to the noise (it costs `lobe_prior_weight` of the texel's
 // RMS radiance per sample for a unit deviation, negligible wherever the data do constrain them).
 //
+// A second weak prior, a ridge on the specular albedo A_c = rho_s,c 2 pi / (k + 2), costing
+// specular_prior_weight * noise_sigma^2 * (A_c / 0.1)^2: when the samples miss a narrow lobe's
+// peak, lobes of any height fit its tails equally well (up to the noise), and without it the fit
+// may pick a tall one whose peak hides between the lights, which relights terribly. It is a
+// tie-breaker at the noise level: an observed lobe's data outweigh it by orders of magnitude.
+//
 // TWO PATHS, one objective (same samples, init, prior and bounds; they differ only in the solver):
 //   kCeresReference: ceres::Solve on all 9 parameters (rho_d, rho_s, cx, cy, log k), autodiff,
 //     DENSE_QR, Levenberg-Marquardt, bounds. Slow (~100 us/texel), the yardstick.
@@ -108,6 +114,8 @@ struct BrdfFitOptions {
   double max_specular_albedo = 1.0;      // energy bound: rho_s 2 pi / (k + 2) <= this (the lobe's
                                          // reflected fraction at normal view; radiance / E units)
   double lobe_prior_weight = 3e-3;       // pull of (cx, cy) towards (-1, -1), see above
+  double specular_prior_weight = 1.0;    // cost, in noise variances (noise_sigma^2), of a
+                                         // specular albedo of 0.1 per channel, see above
   int max_iterations = 50;               // per texel, either path
   int num_threads = 0;                   // worker threads; 0 = all cores
   Status Validate() const;

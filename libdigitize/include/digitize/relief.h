@@ -14,6 +14,8 @@ struct ReliefOptions {
   int cell_px = 16;                // n: cells of n x n texels become boxes
   double noise_margin_mm = 0;      // classify at delta0 - margin so texels whose true height is
                                    // just above delta0 are not lost to noise (0 = none)
+  int cover_px = 1;                // boxes cover Mv grown by this many texels (0 = Mv exactly), so
+                                   // relief between texel centres is inside a box too
   double min_relief_mm = 0.02;     // relief floor: a canvas whose highest point is not above this
                                    // has no significant relief (no boxes)
   Status Validate() const;
