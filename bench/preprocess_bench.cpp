@@ -32,19 +32,19 @@ struct Case {
   synth::SyntheticScan scan;
 };
 
-// The same synthetic painting at a given scan size; painting resolution follows the scan so the
-// output grid has about the scan's sampling.
+// The same synthetic painting at a given scan size; the painting's resolution matches the scan's
+// sampling (synth::MatchedResolution) so the truth holds no detail the scan cannot resolve.
 std::unique_ptr<Case> MakeCase(int scan_px, double noise_mm, uint64_t seed) {
   auto c = std::make_unique<Case>();
-  synth::PaintingOptions po;
-  po.resolution_px = scan_px;
-  po.seed = seed;
-  c->painting = synth::MakePainting(po);
-  c->scene = std::make_unique<synth::Scene>(c->painting, synth::FrameOptions{});
   synth::ScanSimOptions so;
   so.width_px = so.height_px = scan_px;
   so.noise_mm = noise_mm;
   so.seed = seed;
+  synth::PaintingOptions po;
+  po.resolution_px = synth::MatchedResolution(po, synth::FrameOptions{}, so);
+  po.seed = seed;
+  c->painting = synth::MakePainting(po);
+  c->scene = std::make_unique<synth::Scene>(c->painting, synth::FrameOptions{});
   c->scan = synth::SimulateScan(*c->scene, so);
   return c;
 }

@@ -79,8 +79,16 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
       uni += e || t;
       uint8_t hit = scan.hit_scan.data[i];
       if (e && (hit == static_cast<uint8_t>(Scene::Hit::kFrame) ||
-                hit == static_cast<uint8_t>(Scene::Hit::kWall)))
+                hit == static_cast<uint8_t>(Scene::Hit::kWall))) {
         ++acc.frame_pixels_kept;
+        // How far above the true canvas plane the kept frame sample lies (first exposure, noisy):
+        // a wall-foot sample within the noise of the plane cannot be told from canvas.
+        const Vec3f& p = scan.exposures.front().xyz_mm.data[i];
+        if (IsValid(p)) {
+          const double z = truth_cfs.Apply(p.cast<double>()).z();
+          acc.frame_pixels_max_height_mm = std::max(acc.frame_pixels_max_height_mm, std::abs(z));
+        }
+      }
     }
     acc.mask_iou = uni == 0 ? 1.0 : static_cast<double>(inter) / static_cast<double>(uni);
   } else {

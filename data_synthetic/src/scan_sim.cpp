@@ -270,4 +270,14 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
   return out;
 }
 
+int MatchedResolution(const PaintingOptions& painting, const FrameOptions& frame,
+                      const ScanSimOptions& scan) {
+  const double frame_mm = frame.enabled ? 2 * frame.width_mm : 0;
+  const double field_x = (painting.width_mm + frame_mm) * (1 + scan.field_margin);
+  const double field_y = (painting.height_mm + frame_mm) * (1 + scan.field_margin);
+  const double pitch = std::max(field_x / std::max(scan.width_px, 1), field_y / std::max(scan.height_px, 1));
+  const double long_side = std::max(painting.width_mm, painting.height_mm);
+  return std::clamp(static_cast<int>(long_side / (1.1 * pitch)), 64, 8192);
+}
+
 }  // namespace digitize::synth

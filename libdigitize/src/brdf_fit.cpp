@@ -300,56 +300,70 @@ class TexelProblem {
     const double dbmax_dt = max_specular_albedo_ * k_ / (2.0 * kPi);
     const float* g_ptr = Slot(kG);
     const float* d_ptr[3] = {Slot(kD), Slot(kD + 1), Slot(kD + 2)};
+    // Pass 1, channels folded: V = sum_s (sum_c b_c^2 e_c^2) dg dg^T (6 sums) and the b dg part
+    // of J^T r = sum_s dg sum_c b_c e_c r_c (3 sums).
+    float af[3], bf[3];
+    for (int c = 0; c < 3; ++c) {
+      af[c] = static_cast<float>(fit.channel[c].a);
+      bf[c] = static_cast<float>(fit.channel[c].b);
+    }
+    Block v[6], er[3];
+    for (Block& x : v) x.setZero();
+    for (Block& x : er) x.setZero();
+    for (int i = 0; i < np_; i += kBlock) {
+      const Block g = Block::Map(g_ptr + i);
+      Block wv = Block::Zero(), wr = Block::Zero();
+      for (int c = 0; c < 3; ++c) {
+        if (bf[c] <= 0.0f) continue;  // no lobe in this channel: its residual does not depend on theta
+        const Block e = Block::Map(Slot(kE + c) + i);
+        wv += (bf[c] * bf[c]) * Block::Map(Slot(kE2 + c) + i);
+        wr += bf[c] * e * (e * (af[c] + bf[c] * g) - Block::Map(Slot(kL + c) + i));
+      }
+      const Block d0 = Block::Map(d_ptr[0] + i), d1 = Block::Map(d_ptr[1] + i), d2 = Block::Map(d_ptr[2] + i);
+      const Block wd0 = wv * d0, wd1 = wv * d1;
+      v[0] += wd0 * d0;
+      v[1] += wd0 * d1;
+      v[2] += wd0 * d2;
+      v[3] += wd1 * d1;
+      v[4] += wd1 * d2;
+      v[5] += wv * d2 * d2;
+      er[0] += wr * d0;
+      er[1] += wr * d1;
+      er[2] += wr * d2;
+    }
+    const int index[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+    for (int i = 0; i < 3; ++i) {
+      (*jtr)[i] = er[i].sum();
+      for (int j = 0; j < 3; ++j) (*jtj)(i, j) = v[index[i][j]].sum();
+    }
+    // Pass 2, per channel with a lobe: t = sum e^2 dg, u = sum e^2 g dg for the projection.
     for (int c = 0; c < 3; ++c) {
       const ChannelFit& f = fit.channel[c];
       const double b = f.b;
-      if (b <= 0.0) continue;  // no lobe in this channel: its residual does not depend on theta
+      if (b <= 0.0) continue;
       const ChannelSums& m = sums[c];
-      const float af = static_cast<float>(f.a), bf = static_cast<float>(b);
-      const float* e_ptr = Slot(kE + c);
-      const float* l_ptr = Slot(kL + c);
       const float* e2_ptr = Slot(kE2 + c);
-      // Per dg_j: t = sum e^2 dg, u = sum e^2 g dg, er = sum e r dg; v = sum e^2 dg_i dg_j.
-      Block t[3], u[3], er[3], v[6];
+      Block t[3], u[3];
       for (Block& x : t) x.setZero();
       for (Block& x : u) x.setZero();
-      for (Block& x : er) x.setZero();
-      for (Block& x : v) x.setZero();
       for (int i = 0; i < np_; i += kBlock) {
-        const Block g = Block::Map(g_ptr + i), e2 = Block::Map(e2_ptr + i), e = Block::Map(e_ptr + i);
-        const Block e2g = e2 * g;
-        const Block er_s = e * (e * (af + bf * g) - Block::Map(l_ptr + i));
-        const Block d0 = Block::Map(d_ptr[0] + i), d1 = Block::Map(d_ptr[1] + i), d2 = Block::Map(d_ptr[2] + i);
-        t[0] += e2 * d0;
-        t[1] += e2 * d1;
-        t[2] += e2 * d2;
-        u[0] += e2g * d0;
-        u[1] += e2g * d1;
-        u[2] += e2g * d2;
-        er[0] += er_s * d0;
-        er[1] += er_s * d1;
-        er[2] += er_s * d2;
-        v[0] += e2 * d0 * d0;
-        v[1] += e2 * d0 * d1;
-        v[2] += e2 * d0 * d2;
-        v[3] += e2 * d1 * d1;
-        v[4] += e2 * d1 * d2;
-        v[5] += e2 * d2 * d2;
+        const Block e2 = Block::Map(e2_ptr + i), e2g = e2 * Block::Map(g_ptr + i);
+        for (int j = 0; j < 3; ++j) {
+          const Block dj = Block::Map(d_ptr[j] + i);
+          t[j] += e2 * dj;
+          u[j] += e2g * dj;
+        }
       }
       // Column j of this channel's Jacobian is e w_j, w_j = b dg_j (+ beta g for t when b sits
       // on b_max(t)): scale the sums by b and add the beta terms.
       const double beta = f.b_at_max ? dbmax_dt : 0.0;
       Eigen::Vector3d tj, uj;
-      Eigen::Matrix3d vv;
       for (int j = 0; j < 3; ++j) {
         tj[j] = b * t[j].sum();
         uj[j] = b * u[j].sum();
-        (*jtr)[j] += b * er[j].sum();
       }
-      const int index[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
-      for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) vv(i, j) = b * b * v[index[i][j]].sum();
       const double s2_data = m.s2 - Ridge(k_);  // the ridge row is not a sample
+      Eigen::Matrix3d vv = Eigen::Matrix3d::Zero();
       if (beta > 0.0) {
         const Eigen::Vector3d et(0.0, 0.0, 1.0);
         vv += beta * (uj * et.transpose() + et * uj.transpose()) + beta * beta * s2_data * et * et.transpose();

@@ -15,7 +15,7 @@ namespace {
 
 struct DemoArgs {
   std::string out = "digitize-demo";
-  int resolution = 1024;
+  int resolution = 0;  // 0 = matched to the scan's sampling
   int scan_px = 1024;
   uint64_t seed = 1;
   double noise_mm = 0.02;
@@ -24,20 +24,22 @@ struct DemoArgs {
 
 int RunDemo(const DemoArgs& args) {
   const std::string cmd = "demo";
-  synth::PaintingOptions painting_options;
-  painting_options.resolution_px = args.resolution;
-  painting_options.seed = args.seed;
   synth::ScanSimOptions scan_options;
   scan_options.width_px = scan_options.height_px = args.scan_px;
   scan_options.noise_mm = args.noise_mm;
   scan_options.seed = args.seed;
+  synth::PaintingOptions painting_options;
+  painting_options.resolution_px =
+      args.resolution > 0 ? args.resolution
+                          : synth::MatchedResolution(painting_options, synth::FrameOptions{}, scan_options);
+  painting_options.seed = args.seed;
   if (Status s = painting_options.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = scan_options.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
 
   std::printf("digitize demo: a synthetic %.0f x %.0f mm painting (%d texels on the long side), "
               "framed, scanned at %dx%d with %.3f mm noise, %.0f deg tilt, holes and outliers\n",
-              painting_options.width_mm, painting_options.height_mm, args.resolution, args.scan_px,
+              painting_options.width_mm, painting_options.height_mm, painting_options.resolution_px, args.scan_px,
               args.scan_px, args.noise_mm, scan_options.tilt_deg);
   std::fflush(stdout);  // before the progress bars on stderr
   PreprocessResult result;
@@ -94,7 +96,8 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
       "Run the whole pipeline on a synthetic painting generated on the fly and print its accuracy "
       "against the ground truth");
   c->add_option("-o,--out", args->out, "Output folder")->capture_default_str();
-  c->add_option("--resolution", args->resolution, "Painting texels along the long side")
+  c->add_option("--resolution", args->resolution,
+                "Painting texels along the long side (0 = matched to the scan's sampling)")
       ->capture_default_str();
   c->add_option("--scan-px", args->scan_px, "Scan grid size (square)")->capture_default_str();
   c->add_option("--noise-mm", args->noise_mm, "Scan noise sigma (mm)")->capture_default_str();

@@ -16,6 +16,9 @@ struct PreprocessAccuracy {
   double normal_error_deg = 0;     // canvas plane normal vs truth
   double mask_iou = 0;             // estimated vs true canvas mask in scan pixels
   size_t frame_pixels_kept = 0;    // true frame/wall pixels in the estimated mask
+  double frame_pixels_max_height_mm = 0;  // of those, the largest |height| above the true canvas
+                                          // plane (a wall foot within noise of the plane is
+                                          // indistinguishable from canvas)
   double height_rmse_mm = 0;       // on texels with height, true surface vs estimate, along the
                                    // true normal, after removing the constant offset (the zero
                                    // of heights is a convention: see height_field.h)

@@ -62,7 +62,7 @@ enum class ScannerModel { kOrthographic, kPinhole };
 
 struct ScanSimOptions {
   ScannerModel model = ScannerModel::kOrthographic;
-  int width_px = 512, height_px = 512;  // scan grid
+  int width_px = 1024, height_px = 1024;  // scan grid (about 0.6 mm samples on the default canvas)
   double field_margin = 0.25;  // the field of view spans the canvas plus frame plus this share
                                // (negative: crops into it; see SimulateScan)
   double tilt_deg = 8;         // canvas plane tilt against the scanner's image plane
@@ -107,5 +107,11 @@ struct SyntheticScan {
 // Deterministic for options.seed, independent of thread scheduling. Invalid options, or a pinhole
 // pose that puts the scene behind the scanner, throw (validate first).
 SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options);
+
+// Painting resolution (texels on the long side, 64..8192) whose texel pitch is about 1.1x the
+// scan's sample spacing on the canvas, so the truth holds no detail the scanner cannot resolve
+// (ground truth for normals is then meaningful). Ignores tilt, which only stretches the sampling.
+int MatchedResolution(const PaintingOptions& painting, const FrameOptions& frame,
+                      const ScanSimOptions& scan);
 
 }  // namespace digitize::synth
