@@ -38,7 +38,8 @@ int g_texels = 20000;
 int g_threads = 2;
 
 Vec3f RotateZ(const Vec3f& d, float angle) {
-  return {std::cos(angle) * d.x() - std::sin(angle) * d.y(), std::sin(angle) * d.x() + std::cos(angle) * d.y(), d.z()};
+  return {std::cos(angle) * d.x() - std::sin(angle) * d.y(),
+          std::sin(angle) * d.x() + std::cos(angle) * d.y(), d.z()};
 }
 
 struct Dataset {
@@ -108,7 +109,8 @@ struct Row {
   std::string method;
   float noise_sigma = 0;
   double seconds = 0, cpu_seconds = 0;
-  double relight_rmse = 0, relight_median = 0, relight_p90 = 0, relight_p99 = 0, param_log_k_median = 0;
+  double relight_rmse = 0, relight_median = 0, relight_p90 = 0, relight_p99 = 0,
+         param_log_k_median = 0;
   BrdfFitSummary summary;
 };
 std::vector<Row> g_rows;
@@ -124,7 +126,9 @@ void MeasureRelighting(const Dataset& d, const BrdfFitResult& r, Row* row) {
     for (int i = 0; i < kHeldOutPerTexel; ++i) {
       const Vec3f& v = d.held_out_view[t * kHeldOutPerTexel + i];
       const Vec3f& l = d.held_out_light[t * kHeldOutPerTexel + i];
-      texel_sum += ((EvaluateLafortune(r.params[t], v, l) - EvaluateLafortune(d.truth[t], v, l)) * l.z()).squaredNorm();
+      texel_sum +=
+          ((EvaluateLafortune(r.params[t], v, l) - EvaluateLafortune(d.truth[t], v, l)) * l.z())
+              .squaredNorm();
     }
     sum += texel_sum;
     per_texel[t] = std::sqrt(texel_sum / (3.0 * kHeldOutPerTexel));
@@ -181,18 +185,22 @@ void BM_Fit(benchmark::State& state, BrdfFitMethod method, float noise_sigma) {
 
 void WriteCsv(const std::filesystem::path& path) {
   std::ostringstream out;
-  out << "method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,cpu_us_per_texel,relight_rmse,"
-         "relight_median_texel,relight_p90_texel,relight_p99_texel,log_k_error_median,converged_pct,diffuse_only_pct,"
+  out << "method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,cpu_us_per_"
+         "texel,relight_rmse,"
+         "relight_median_texel,relight_p90_texel,relight_p99_texel,log_k_error_median,converged_"
+         "pct,diffuse_only_pct,"
          "too_few_pct,clamped_k_pct,iteration_limit_pct,failed_pct,mean_iterations\n";
   for (const Row& r : g_rows) {
     const BrdfFitSummary& s = r.summary;
     out << r.method << "," << r.noise_sigma << "," << s.texels << ","
-        << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << "," << r.seconds << ","
-        << 1e6 * r.seconds / static_cast<double>(s.texels) << "," << 1e6 * r.cpu_seconds / static_cast<double>(s.texels)
-        << "," << r.relight_rmse << "," << r.relight_median << ","
-        << r.relight_p90 << "," << r.relight_p99 << "," << r.param_log_k_median;
+        << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << "," << r.seconds
+        << "," << 1e6 * r.seconds / static_cast<double>(s.texels) << ","
+        << 1e6 * r.cpu_seconds / static_cast<double>(s.texels) << "," << r.relight_rmse << ","
+        << r.relight_median << "," << r.relight_p90 << "," << r.relight_p99 << ","
+        << r.param_log_k_median;
     for (int i = 0; i < kTexelFitStatusCount; ++i)
-      out << "," << 100.0 * static_cast<double>(s.count_by_status[i]) / static_cast<double>(s.texels);
+      out << ","
+          << 100.0 * static_cast<double>(s.count_by_status[i]) / static_cast<double>(s.texels);
     out << "," << s.mean_iterations << "\n";
   }
   std::ofstream(path) << out.str();
@@ -200,13 +208,14 @@ void WriteCsv(const std::filesystem::path& path) {
 }
 
 void PrintSideBySide() {
-  std::printf("\n%-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise", "us/texel", "CPU us/texel",
-              "relight RMSE", "median (texel)", "p90 (texel)", "p99 (texel)", "brief");
+  std::printf("\n%-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise", "us/texel",
+              "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)", "p99 (texel)",
+              "brief");
   for (const Row& r : g_rows)
-    std::printf("%-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n", r.method.c_str(), r.noise_sigma,
-                1e6 * r.seconds / static_cast<double>(r.summary.texels),
-                1e6 * r.cpu_seconds / static_cast<double>(r.summary.texels), r.relight_rmse, r.relight_median,
-                r.relight_p90, r.relight_p99, r.summary.BriefReport().c_str());
+    std::printf("%-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n", r.method.c_str(),
+                r.noise_sigma, 1e6 * r.seconds / static_cast<double>(r.summary.texels),
+                1e6 * r.cpu_seconds / static_cast<double>(r.summary.texels), r.relight_rmse,
+                r.relight_median, r.relight_p90, r.relight_p99, r.summary.BriefReport().c_str());
 }
 
 }  // namespace
@@ -216,17 +225,27 @@ int main(int argc, char** argv) {
   std::vector<char*> rest;
   for (int i = 0; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (arg.rfind("--texels=", 0) == 0) g_texels = std::max(1, std::stoi(arg.substr(9)));
-    else if (arg.rfind("--threads=", 0) == 0) g_threads = std::max(0, std::stoi(arg.substr(10)));
-    else if (arg.rfind("--csv-dir=", 0) == 0) csv_dir = arg.substr(10);
-    else rest.push_back(argv[i]);
+    if (arg.rfind("--texels=", 0) == 0)
+      g_texels = std::max(1, std::stoi(arg.substr(9)));
+    else if (arg.rfind("--threads=", 0) == 0)
+      g_threads = std::max(0, std::stoi(arg.substr(10)));
+    else if (arg.rfind("--csv-dir=", 0) == 0)
+      csv_dir = arg.substr(10);
+    else
+      rest.push_back(argv[i]);
   }
   for (float noise : {0.002f, 0.0f}) {
     const std::string suffix = noise > 0 ? "/noise_0.002" : "/noise_free";
-    benchmark::RegisterBenchmark(("brdf_fit/fast" + suffix).c_str(), BM_Fit, BrdfFitMethod::kFast, noise)
-        ->Unit(benchmark::kMillisecond)->Iterations(5)->UseRealTime();
-    benchmark::RegisterBenchmark(("brdf_fit/ceres" + suffix).c_str(), BM_Fit, BrdfFitMethod::kCeresReference, noise)
-        ->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
+    benchmark::RegisterBenchmark(("brdf_fit/fast" + suffix).c_str(), BM_Fit, BrdfFitMethod::kFast,
+                                 noise)
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(5)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("brdf_fit/ceres" + suffix).c_str(), BM_Fit,
+                                 BrdfFitMethod::kCeresReference, noise)
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(1)
+        ->UseRealTime();
   }
   int rest_argc = static_cast<int>(rest.size());
   benchmark::Initialize(&rest_argc, rest.data());

@@ -2,6 +2,8 @@
 // directions, analytic and autodiff derivatives against numeric ones, the gauge conversion, the
 // numerical contract at extreme k and grazing angles; and the measured-fits parser, on the real
 // file and on hostile inputs.
+#include "digitize/lafortune.h"
+
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
@@ -11,8 +13,6 @@
 #include <limits>
 #include <random>
 #include <string>
-
-#include "digitize/lafortune.h"
 
 namespace digitize {
 namespace {
@@ -103,7 +103,8 @@ TEST(Lafortune, AnalyticDerivativesMatchNumericOnes) {
     const Vec3f v = RandomHemisphere(rng), l = RandomHemisphere(rng);
     const LobeDerivatives d = LafortuneLobeDerivatives(p, v, l);
     const double base = p.cx * v.x() * l.x() + p.cy * v.y() * l.y() + v.z() * l.z();
-    if (base < 1e-2 || d.value < 1e-12) continue;  // the kink at 0 and underflow: nothing to compare
+    if (base < 1e-2 || d.value < 1e-12)
+      continue;  // the kink at 0 and underflow: nothing to compare
     // Step ~1e-6 of the scale each parameter varies on; central differences err by O(h^2 f''').
     const double hc = 1e-6 * base;
     const double num[4] = {NumericLobe(p, v, l, 0, hc), NumericLobe(p, v, l, 1, hc),
@@ -112,7 +113,8 @@ TEST(Lafortune, AnalyticDerivativesMatchNumericOnes) {
     // Scale of a derivative: the value times the sensitivity k/base (for c) or |log base| (for k).
     const double scale[4] = {d.value * p.k / base, d.value * p.k / base, d.value * p.k / base,
                              d.value * (std::abs(std::log(base)) + 1e-3)};
-    for (int j = 0; j < 4; ++j) ASSERT_NEAR(ana[j], num[j], 1e-5 * scale[j]) << "param " << j << " k " << p.k;
+    for (int j = 0; j < 4; ++j)
+      ASSERT_NEAR(ana[j], num[j], 1e-5 * scale[j]) << "param " << j << " k " << p.k;
     ++checked;
   }
   EXPECT_GT(checked, 1000);
@@ -215,7 +217,7 @@ TEST(Lafortune, ExtremeExponentsStayFinite) {
   p.rho_s = Vec3f::Ones();
   p.k = 0.0f;
   const Vec3f l = Vec3f(0.6f, 0.0f, 0.8f);
-  EXPECT_EQ(EvaluateLafortune(p, Vec3f(-0.6f, 0.0f, 0.8f), l).x(), 1.0f);   // base 1
+  EXPECT_EQ(EvaluateLafortune(p, Vec3f(-0.6f, 0.0f, 0.8f), l).x(), 1.0f);    // base 1
   EXPECT_EQ(EvaluateLafortune(p, Vec3f(0.99f, 0.0f, 0.141f), l).x(), 0.0f);  // base < 0
   // k -> infinity: the lobe tends to 0 off the peak, stays 1 exactly at the mirror direction.
   p.k = 1e6f;
@@ -266,8 +268,8 @@ TEST(Lafortune, ValidateNamesTheField) {
 
 // <repo>/tests/lafortune_test.cpp -> <repo>/../shared/data (the project's shared data folder).
 std::filesystem::path MeasuredFitsPath() {
-  return std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "shared" / "data" /
-         "lafortune_measured_fits.txt";
+  return std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "shared" /
+         "data" / "lafortune_measured_fits.txt";
 }
 
 TEST(MeasuredLafortune, ReadsThePublishedFits) {
@@ -324,10 +326,12 @@ TEST(MeasuredLafortune, HostileInputsNameTheLine) {
   struct Case {
     std::string text, expect;
   } cases[] = {
-      {"m diffuse 0.1 0.2 0.3\nm 0 -1,-1,-1 abc 10\n", "fits.txt:2: lobe 0 of m: Cz: 'abc' is not a finite number"},
+      {"m diffuse 0.1 0.2 0.3\nm 0 -1,-1,-1 abc 10\n",
+       "fits.txt:2: lobe 0 of m: Cz: 'abc' is not a finite number"},
       {"m diffuse 0.1 0.2\n", "fits.txt:1: expected 5 columns"},
       {"m diffuse 0.1 0.2 0.3\n\nm 0 -1,-1,-1 0.5\n", "fits.txt:3: expected 5 columns"},
-      {"m diffuse 0.1 0.2 0.3\nm 0 -1,-1 0.5 10\n", "fits.txt:2: lobe 0 of m: Cxy: '-1,-1' has 2 values"},
+      {"m diffuse 0.1 0.2 0.3\nm 0 -1,-1 0.5 10\n",
+       "fits.txt:2: lobe 0 of m: Cxy: '-1,-1' has 2 values"},
       {"m diffuse 0.1 0.2 0.3\nm 0 -1,-1,-1,-1 0.5 10\n", "more than 3 values"},
       {"m diffuse 0.1 0.2 0.3\nm 0 -1,,-1 0.5 10\n", "fits.txt:2: lobe 0 of m: Cxy"},
       {"m diffuse nan 0.2 0.3\n", "fits.txt:1: diffuse of m: 'nan' is not a finite number"},
@@ -336,11 +340,14 @@ TEST(MeasuredLafortune, HostileInputsNameTheLine) {
       {"m diffuse 0.1 0.2 0.3x\n", "'0.3x' is not a finite number"},
       {"m diffuse 1e999 0.2 0.3\n", "fits.txt:1"},
       {"m diffuse 0.1 0.2 0.3\nm 1 -1 0.5 10\n", "fits.txt:2: lobe 1 of m: expected lobe 0"},
-      {"m diffuse 0.1 0.2 0.3\nm 0 -1 0.5 10\nm 0 -1 0.5 10\n", "fits.txt:3: lobe 0 of m: expected lobe 1"},
+      {"m diffuse 0.1 0.2 0.3\nm 0 -1 0.5 10\nm 0 -1 0.5 10\n",
+       "fits.txt:3: lobe 0 of m: expected lobe 1"},
       {"m diffuse 0.1 0.2 0.3\nm diffuse 0.1 0.2 0.3\n", "fits.txt:2: second diffuse row"},
-      {"m diffuse 0.1 0.2 0.3\nm x -1 0.5 10\n", "fits.txt:2: second column must be 'diffuse' or a lobe index"},
+      {"m diffuse 0.1 0.2 0.3\nm x -1 0.5 10\n",
+       "fits.txt:2: second column must be 'diffuse' or a lobe index"},
       {"m diffuse 0.1 0.2 0.3\nm -1 -1 0.5 10\n", "fits.txt:2: second column"},
-      {"m diffuse 0.1 0.2 0.3\nm 0 -1 0.5 -2\n", "fits.txt:2: lobe 0 of m: exponent n must be >= 0"},
+      {"m diffuse 0.1 0.2 0.3\nm 0 -1 0.5 -2\n",
+       "fits.txt:2: lobe 0 of m: exponent n must be >= 0"},
       {"m 0 -1 0.5 10\n", "fits.txt: material m has no diffuse row"},
       {"# only comments\n\n", "fits.txt: no material rows"},
       {"", "fits.txt: no material rows"},
@@ -348,7 +355,8 @@ TEST(MeasuredLafortune, HostileInputsNameTheLine) {
   };
   for (const Case& c : cases) {
     const std::string message = ParseError(c.text);
-    EXPECT_NE(message.find(c.expect), std::string::npos) << "input: " << c.text << "\ngot: '" << message << "'";
+    EXPECT_NE(message.find(c.expect), std::string::npos)
+        << "input: " << c.text << "\ngot: '" << message << "'";
   }
   // Garbage bytes never crash the parser.
   std::mt19937 rng(8);

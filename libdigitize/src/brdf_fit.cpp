@@ -14,6 +14,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -23,8 +24,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <Eigen/Cholesky>
 
 namespace digitize {
 namespace {
@@ -112,7 +111,8 @@ ChannelFit SolveChannel(const ChannelSums& m, double b_max) {
     best_cost = c;
   }
   if (b_max > 0.0)
-    if (const double c = QuadraticCost(m, a_at_max, b_max); c < best_cost - slack) best = {a_at_max, b_max, true};
+    if (const double c = QuadraticCost(m, a_at_max, b_max); c < best_cost - slack)
+      best = {a_at_max, b_max, true};
   return best;
 }
 
@@ -174,11 +174,13 @@ class TexelProblem {
       sums_[c].p0 = el(c).sum();
       sums_[c].ll = L(c).square().sum();
     }
-    const double mean_square = n_ > 0 ? (sums_[0].ll + sums_[1].ll + sums_[2].ll) / (3.0 * n_) : 0.0;
+    const double mean_square =
+        n_ > 0 ? (sums_[0].ll + sums_[1].ll + sums_[2].ll) / (3.0 * n_) : 0.0;
     prior_w2_ = options.lobe_prior_weight * options.lobe_prior_weight * n_ * mean_square;
     max_specular_albedo_ = options.max_specular_albedo;
     // w sigma^2 per (specular albedo / 0.1)^2 per channel; see brdf_fit.h.
-    albedo_ridge_ = options.specular_prior_weight * options.noise_sigma * options.noise_sigma / (0.1 * 0.1);
+    albedo_ridge_ =
+        options.specular_prior_weight * options.noise_sigma * options.noise_sigma / (0.1 * 0.1);
   }
 
   int n() const { return n_; }
@@ -221,7 +223,8 @@ class TexelProblem {
     tmp() = kf * g() / base();  // dg/dc = k g / base * dbase/dc
     d(0) = tmp() * View(kAx);
     d(1) = tmp() * View(kAy);
-    d(2) = kf * g() * log_base().max(kMinLobeLog);  // dg/dt = k dg/dk = k g log(base); g = 0 where clamped
+    d(2) = kf * g() *
+           log_base().max(kMinLobeLog);  // dg/dt = k dg/dk = k g log(base); g = 0 where clamped
   }
   void SetShape(const Shape& s, bool derivatives) {
     SetLobeDirection(s.cx, s.cy);
@@ -261,7 +264,8 @@ class TexelProblem {
       }
       ChannelSums m = sums_[c];
       m.s1 = s1.sum();
-      m.s2 = s2.sum() + Ridge(k_);  // the ridge is one more (fake) residual sqrt(ridge) b per channel
+      m.s2 =
+          s2.sum() + Ridge(k_);  // the ridge is one more (fake) residual sqrt(ridge) b per channel
       m.p1 = p1.sum();
       fit.channel[c] = SolveChannel(m, BMax());
       if (sums_out) (*sums_out)[c] = m;
@@ -281,7 +285,8 @@ class TexelProblem {
     for (int i = 0; i < np_; i += kBlock) {
       const Block g = Block::Map(g_ptr + i);
       for (int c = 0; c < 3; ++c)
-        acc += (Block::Map(Slot(kE + c) + i) * (a[c] + b[c] * g) - Block::Map(Slot(kL + c) + i)).square();
+        acc += (Block::Map(Slot(kE + c) + i) * (a[c] + b[c] * g) - Block::Map(Slot(kL + c) + i))
+                   .square();
     }
     return acc.sum();
   }
@@ -293,8 +298,8 @@ class TexelProblem {
   // slows LM), computed as V - Q^T M^-1 Q from sums (one pass per channel).
   // A channel whose b sits on the energy bound b_max(k) has b = b_max(t), so its residual also
   // moves with t through b: the extra column e g db_max/dt.
-  void NormalEquations(const LinearFit& fit, const std::array<ChannelSums, 3>& sums, const Shape& shape,
-                       Eigen::Matrix3d* jtj, Eigen::Vector3d* jtr) {
+  void NormalEquations(const LinearFit& fit, const std::array<ChannelSums, 3>& sums,
+                       const Shape& shape, Eigen::Matrix3d* jtj, Eigen::Vector3d* jtr) {
     jtj->setZero();
     jtr->setZero();
     const double dbmax_dt = max_specular_albedo_ * k_ / (2.0 * kPi);
@@ -314,12 +319,14 @@ class TexelProblem {
       const Block g = Block::Map(g_ptr + i);
       Block wv = Block::Zero(), wr = Block::Zero();
       for (int c = 0; c < 3; ++c) {
-        if (bf[c] <= 0.0f) continue;  // no lobe in this channel: its residual does not depend on theta
+        if (bf[c] <= 0.0f)
+          continue;  // no lobe in this channel: its residual does not depend on theta
         const Block e = Block::Map(Slot(kE + c) + i);
         wv += (bf[c] * bf[c]) * Block::Map(Slot(kE2 + c) + i);
         wr += bf[c] * e * (e * (af[c] + bf[c] * g) - Block::Map(Slot(kL + c) + i));
       }
-      const Block d0 = Block::Map(d_ptr[0] + i), d1 = Block::Map(d_ptr[1] + i), d2 = Block::Map(d_ptr[2] + i);
+      const Block d0 = Block::Map(d_ptr[0] + i), d1 = Block::Map(d_ptr[1] + i),
+                  d2 = Block::Map(d_ptr[2] + i);
       const Block wd0 = wv * d0, wd1 = wv * d1;
       v[0] += wd0 * d0;
       v[1] += wd0 * d1;
@@ -366,7 +373,8 @@ class TexelProblem {
       Eigen::Matrix3d vv = Eigen::Matrix3d::Zero();
       if (beta > 0.0) {
         const Eigen::Vector3d et(0.0, 0.0, 1.0);
-        vv += beta * (uj * et.transpose() + et * uj.transpose()) + beta * beta * s2_data * et * et.transpose();
+        vv += beta * (uj * et.transpose() + et * uj.transpose()) +
+              beta * beta * s2_data * et * et.transpose();
         tj[2] += beta * m.s1;
         uj[2] += beta * s2_data;
         (*jtr)[2] += beta * (f.a * m.s1 + b * s2_data - m.p1);  // sum e g r
@@ -377,7 +385,8 @@ class TexelProblem {
       const double det = m.s0 * m.s2 - m.s1 * m.s1;
       if (a_free && b_free && det > 1e-12 * m.s0 * m.s2 && det > 0.0) {
         vv -= (m.s2 * tj * tj.transpose() - m.s1 * (tj * uj.transpose() + uj * tj.transpose()) +
-               m.s0 * uj * uj.transpose()) / det;
+               m.s0 * uj * uj.transpose()) /
+              det;
       } else if (a_free && m.s0 > 0.0) {
         vv -= tj * tj.transpose() / m.s0;
       } else if (b_free && m.s2 > 0.0) {
@@ -405,8 +414,21 @@ class TexelProblem {
 
  private:
   // Workspace slots: sample data, then scratch.
-  enum : int { kAx = 0, kAy, kAz, kE, kL = kE + 3, kE2 = kL + 3, kEL = kE2 + 3, kLogBase = kEL + 3,
-               kG, kD, kBase = kD + 3, kTmp, kSlots };
+  enum : int {
+    kAx = 0,
+    kAy,
+    kAz,
+    kE,
+    kL = kE + 3,
+    kE2 = kL + 3,
+    kEL = kE2 + 3,
+    kLogBase = kEL + 3,
+    kG,
+    kD,
+    kBase = kD + 3,
+    kTmp,
+    kSlots
+  };
   static_assert(kSlots <= Workspace::kArrays);
   float* Slot(int i) { return p_ + static_cast<size_t>(i) * cap_; }
   const float* Slot(int i) const { return p_ + static_cast<size_t>(i) * cap_; }
@@ -450,7 +472,8 @@ Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
   problem.SetLobeDirection(kPriorC, kPriorC);
   const double step = std::log(kGridFactor);
   std::array<double, 32> costs{}, ts{};  // log(1e6 / 0.5) / log(4) < 11 points
-  const int count = std::min<int>(costs.size(), 1 + static_cast<int>(std::ceil((bounds.t_hi - bounds.t_lo) / step - 1e-9)));
+  const int count = std::min<int>(
+      costs.size(), 1 + static_cast<int>(std::ceil((bounds.t_hi - bounds.t_lo) / step - 1e-9)));
   int best = 0;
   for (int i = 0; i < count; ++i) {
     ts[i] = std::min(bounds.t_lo + i * step, bounds.t_hi);
@@ -458,16 +481,19 @@ Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
     std::array<ChannelSums, 3> sums;
     const LinearFit fit = problem.SolveLinear(&sums);
     costs[i] = 0;
-    for (int c = 0; c < 3; ++c) costs[i] += sums[c].ll + QuadraticCost(sums[c], fit.channel[c].a, fit.channel[c].b);
+    for (int c = 0; c < 3; ++c)
+      costs[i] += sums[c].ll + QuadraticCost(sums[c], fit.channel[c].a, fit.channel[c].b);
     if (costs[i] < costs[best]) best = i;
   }
   Shape init;
   init.t = ts[best];
   if (best > 0 && best + 1 < count) {
     const double h1 = ts[best] - ts[best - 1], h2 = ts[best + 1] - ts[best];
-    const double d1 = (costs[best] - costs[best - 1]) / h1, d2 = (costs[best + 1] - costs[best]) / h2;
+    const double d1 = (costs[best] - costs[best - 1]) / h1,
+                 d2 = (costs[best + 1] - costs[best]) / h2;
     const double curvature = (d2 - d1) / (0.5 * (h1 + h2));
-    if (curvature > 0.0) init.t = std::clamp(ts[best] - 0.5 * (d1 + d2) / curvature, ts[best - 1], ts[best + 1]);
+    if (curvature > 0.0)
+      init.t = std::clamp(ts[best] - 0.5 * (d1 + d2) / curvature, ts[best - 1], ts[best + 1]);
   }
   return init;
 }
@@ -482,7 +508,8 @@ struct LobeFitOutcome {
 };
 
 // Fast path: bounded Levenberg-Marquardt on (cx, cy, log k) of the variable-projection cost.
-LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bounds, int max_iterations) {
+LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bounds,
+                           int max_iterations) {
   LobeFitOutcome out;
   std::array<ChannelSums, 3> sums;
   problem.SetShape(shape, true);
@@ -497,7 +524,8 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
   for (; it < max_iterations; ++it) {
     // Projected-gradient test (as Ceres): the step x - clamp(x - g) vanishes at a bounded optimum.
     const Shape pg = bounds.Clamp({shape.cx - jtr[0], shape.cy - jtr[1], shape.t - jtr[2]});
-    const double pg_norm = std::max({std::abs(pg.cx - shape.cx), std::abs(pg.cy - shape.cy), std::abs(pg.t - shape.t)});
+    const double pg_norm = std::max(
+        {std::abs(pg.cx - shape.cx), std::abs(pg.cy - shape.cy), std::abs(pg.t - shape.t)});
     if (pg_norm <= kGradientTolerance) {
       out.converged = true;
       break;
@@ -508,9 +536,11 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
     // instead turns the coupling of a clamped parameter into a wrong step for the others (the
     // model can even predict an increase), and LM crawls or stops early.
     const double x[3] = {shape.cx, shape.cy, shape.t};
-    const double lo[3] = {bounds.c_lo, bounds.c_lo, bounds.t_lo}, hi[3] = {bounds.c_hi, bounds.c_hi, bounds.t_hi};
+    const double lo[3] = {bounds.c_lo, bounds.c_lo, bounds.t_lo},
+                 hi[3] = {bounds.c_hi, bounds.c_hi, bounds.t_hi};
     bool held[3];
-    for (int i = 0; i < 3; ++i) held[i] = (x[i] <= lo[i] && jtr[i] > 0.0) || (x[i] >= hi[i] && jtr[i] < 0.0);
+    for (int i = 0; i < 3; ++i)
+      held[i] = (x[i] <= lo[i] && jtr[i] > 0.0) || (x[i] >= hi[i] && jtr[i] < 0.0);
     Eigen::Vector3d step = Eigen::Vector3d::Zero();
     for (int pass = 0; pass < 3; ++pass) {
       Eigen::Matrix3d a = jtj;
@@ -527,7 +557,8 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
       step = a.ldlt().solve(rhs);
       bool more = false;
       for (int i = 0; i < 3; ++i)
-        if (!held[i] && ((x[i] <= lo[i] && step[i] < 0.0) || (x[i] >= hi[i] && step[i] > 0.0))) held[i] = more = true;
+        if (!held[i] && ((x[i] <= lo[i] && step[i] < 0.0) || (x[i] >= hi[i] && step[i] > 0.0)))
+          held[i] = more = true;
       if (!more) break;
     }
     if (!step.allFinite()) {
@@ -615,7 +646,8 @@ LobeFitOutcome FitLobeFast(TexelProblem& problem, Shape shape, const Bounds& bou
 // feasible set as the fast path's, expressed with box bounds, which is all Ceres takes.
 struct LafortuneSampleCost {
   // products = (vx lx, vy ly, vz lz): all the lobe needs of the two directions.
-  LafortuneSampleCost(const Vec3f& products, const Vec3f& e, const Vec3f& radiance, double max_albedo)
+  LafortuneSampleCost(const Vec3f& products, const Vec3f& e, const Vec3f& radiance,
+                      double max_albedo)
       : max_albedo_(max_albedo) {
     for (int i = 0; i < 3; ++i) {
       products_[i] = products[i];
@@ -653,7 +685,8 @@ struct MirrorLobePriorCost {
     return true;
   }
   static ceres::CostFunction* Create(double weight) {
-    return new ceres::AutoDiffCostFunction<MirrorLobePriorCost, 2, 3>(new MirrorLobePriorCost(weight));
+    return new ceres::AutoDiffCostFunction<MirrorLobePriorCost, 2, 3>(
+        new MirrorLobePriorCost(weight));
   }
   double weight_;
 };
@@ -667,13 +700,14 @@ struct SpecularAlbedoPriorCost {
     return true;
   }
   static ceres::CostFunction* Create(double weight) {
-    return new ceres::AutoDiffCostFunction<SpecularAlbedoPriorCost, 3, 3>(new SpecularAlbedoPriorCost(weight));
+    return new ceres::AutoDiffCostFunction<SpecularAlbedoPriorCost, 3, 3>(
+        new SpecularAlbedoPriorCost(weight));
   }
   double weight_;
 };
 
-LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bounds, int max_iterations,
-                            double max_albedo) {
+LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bounds,
+                            int max_iterations, double max_albedo) {
   problem.SetShape(shape, false);
   const LinearFit init = problem.SolveLinear();
   double rho_d[3], rho_s[3], lobe[3] = {shape.cx, shape.cy, shape.t};  // rho_s: fraction of b_max
@@ -689,8 +723,9 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bo
   if (problem.prior_w2() > 0.0)
     cp.AddResidualBlock(MirrorLobePriorCost::Create(std::sqrt(problem.prior_w2())), nullptr, lobe);
   if (problem.albedo_ridge() > 0.0)
-    cp.AddResidualBlock(SpecularAlbedoPriorCost::Create(std::sqrt(problem.albedo_ridge()) * max_albedo), nullptr,
-                        rho_s);
+    cp.AddResidualBlock(
+        SpecularAlbedoPriorCost::Create(std::sqrt(problem.albedo_ridge()) * max_albedo), nullptr,
+        rho_s);
   for (int c = 0; c < 3; ++c) {
     cp.SetParameterLowerBound(rho_d, c, 0.0);
     cp.SetParameterLowerBound(rho_s, c, 0.0);
@@ -722,7 +757,8 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bo
   // The error is measured by the same kernel as on the fast path, so both report alike.
   problem.SetShape(out.shape, false);
   for (int c = 0; c < 3; ++c)
-    out.linear.channel[c] = {std::max(0.0, rho_d[c]), std::clamp(rho_s[c], 0.0, 1.0) * problem.BMax(), false};
+    out.linear.channel[c] = {std::max(0.0, rho_d[c]),
+                             std::clamp(rho_s[c], 0.0, 1.0) * problem.BMax(), false};
   out.sse = problem.Sse(out.linear);
   return out;
 }
@@ -741,9 +777,12 @@ bool Finite(const LafortuneParams& p) {
          std::isfinite(p.cz) && std::isfinite(p.k);
 }
 
-float Rms(double sse, int n) { return n > 0 ? static_cast<float>(std::sqrt(std::max(0.0, sse) / (3.0 * n))) : 0.0f; }
+float Rms(double sse, int n) {
+  return n > 0 ? static_cast<float>(std::sqrt(std::max(0.0, sse) / (3.0 * n))) : 0.0f;
+}
 
-TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& options, Workspace& ws) {
+TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& options,
+                  Workspace& ws) {
   TexelProblem problem(samples, options, ws);
   TexelFit out;
   out.samples_used = problem.n();
@@ -767,10 +806,10 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
   }
   const Bounds bounds{-1.0, 1.0, std::log(options.k_min), std::log(options.k_max)};
   const Shape init = GridInit(problem, bounds);
-  const LobeFitOutcome lobe = options.method == BrdfFitMethod::kCeresReference
-                                  ? FitLobeCeres(problem, init, bounds, options.max_iterations,
-                                                 options.max_specular_albedo)
-                                  : FitLobeFast(problem, init, bounds, options.max_iterations);
+  const LobeFitOutcome lobe =
+      options.method == BrdfFitMethod::kCeresReference
+          ? FitLobeCeres(problem, init, bounds, options.max_iterations, options.max_specular_albedo)
+          : FitLobeFast(problem, init, bounds, options.max_iterations);
   out.iterations = lobe.iterations;
   LafortuneParams p;
   for (int c = 0; c < 3; ++c) {
@@ -812,18 +851,26 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
 
 const char* ToString(TexelFitStatus status) {
   switch (status) {
-    case TexelFitStatus::kConverged: return "converged";
-    case TexelFitStatus::kDiffuseOnly: return "diffuse-only";
-    case TexelFitStatus::kTooFewSamples: return "too few samples";
-    case TexelFitStatus::kClampedK: return "clamped k";
-    case TexelFitStatus::kIterationLimit: return "iteration limit";
-    case TexelFitStatus::kFailed: return "failed";
+    case TexelFitStatus::kConverged:
+      return "converged";
+    case TexelFitStatus::kDiffuseOnly:
+      return "diffuse-only";
+    case TexelFitStatus::kTooFewSamples:
+      return "too few samples";
+    case TexelFitStatus::kClampedK:
+      return "clamped k";
+    case TexelFitStatus::kIterationLimit:
+      return "iteration limit";
+    case TexelFitStatus::kFailed:
+      return "failed";
   }
   return "unknown";
 }
 
 Status BrdfFitOptions::Validate() const {
-  if (min_samples < 1) return Error{"min_samples must be >= 1 (samples per texel), got " + std::to_string(min_samples)};
+  if (min_samples < 1)
+    return Error{"min_samples must be >= 1 (samples per texel), got " +
+                 std::to_string(min_samples)};
   if (!(std::isfinite(noise_sigma) && noise_sigma >= 0.0))
     return Error{"noise_sigma must be finite and >= 0 (radiance units), got " + Str(noise_sigma)};
   if (std::isnan(diffuse_chi2_sigmas) || std::isinf(diffuse_chi2_sigmas))
@@ -840,11 +887,14 @@ Status BrdfFitOptions::Validate() const {
     return Error{"max_specular_albedo must be finite and > 0 (fraction of the irradiance), got " +
                  Str(max_specular_albedo)};
   if (!(std::isfinite(specular_prior_weight) && specular_prior_weight >= 0.0))
-    return Error{"specular_prior_weight must be finite and >= 0 (noise variances), got " + Str(specular_prior_weight)};
+    return Error{"specular_prior_weight must be finite and >= 0 (noise variances), got " +
+                 Str(specular_prior_weight)};
   if (!(std::isfinite(lobe_prior_weight) && lobe_prior_weight >= 0.0))
     return Error{"lobe_prior_weight must be finite and >= 0, got " + Str(lobe_prior_weight)};
-  if (max_iterations < 1) return Error{"max_iterations must be >= 1, got " + std::to_string(max_iterations)};
-  if (num_threads < 0) return Error{"num_threads must be >= 0 (0 = all cores), got " + std::to_string(num_threads)};
+  if (max_iterations < 1)
+    return Error{"max_iterations must be >= 1, got " + std::to_string(max_iterations)};
+  if (num_threads < 0)
+    return Error{"num_threads must be >= 0 (0 = all cores), got " + std::to_string(num_threads)};
   return Status::Ok();
 }
 
@@ -854,9 +904,15 @@ std::string BrdfFitSummary::BriefReport() const {
   for (int s = 0; s < kTexelFitStatusCount; ++s) {
     const size_t n = count_by_status[s];
     if (n == 0 && s != 0) continue;
-    const double percent = texels > 0 ? 100.0 * static_cast<double>(n) / static_cast<double>(texels) : 0.0;
-    std::snprintf(buffer, sizeof buffer, "%s%.1f %% %s", out.empty() ? "" : ", ", percent,
-                  ToString(static_cast<TexelFitStatus>(s)));
+    const double percent =
+        texels > 0 ? 100.0 * static_cast<double>(n) / static_cast<double>(texels) : 0.0;
+    // A class that exists but rounds to 0.0 % reads "< 0.1 %", so it is not mistaken for none.
+    if (n > 0 && percent < 0.05)
+      std::snprintf(buffer, sizeof buffer, "%s< 0.1 %% %s", out.empty() ? "" : ", ",
+                    ToString(static_cast<TexelFitStatus>(s)));
+    else
+      std::snprintf(buffer, sizeof buffer, "%s%.1f %% %s", out.empty() ? "" : ", ", percent,
+                    ToString(static_cast<TexelFitStatus>(s)));
     out += buffer;
   }
   std::snprintf(buffer, sizeof buffer, "; %.3g s", seconds);
@@ -915,7 +971,8 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
     }
   };
   tbb::task_arena arena(options.num_threads > 0 ? options.num_threads : tbb::task_arena::automatic);
-  arena.execute([&] { tbb::parallel_for(tbb::blocked_range<size_t>(0, texels, kTexelGrain), body); });
+  arena.execute(
+      [&] { tbb::parallel_for(tbb::blocked_range<size_t>(0, texels, kTexelGrain), body); });
 
   BrdfFitSummary& s = result.summary;
   s.method = options.method;

@@ -22,6 +22,7 @@
 //   6. Canvas frame: Z = robust normal, X = the in-plane PCA axis closest to scan +X, origin at
 //      the lower-left corner of the mask points' bounding rectangle, height 0 on the plane.
 #include "digitize/canvas.h"
+#include "mask_ops.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -380,21 +381,6 @@ void GrowableMask(const Grid<Vec3f>& xyz, const LocalFrame& frame, double stop_g
       slot_of[2] = old;
     }
   });
-}
-
-// Pixels of `mask` (0/255) reachable from the image border through non-mask pixels are the
-// outside; the others (enclosed islands) are returned as 255.
-cv::Mat EnclosedIslands(const cv::Mat& mask) {
-  cv::Mat islands = cv::Mat::zeros(mask.size(), CV_8U);
-  // Islands lie inside the mask's bounding rectangle: flood only that part.
-  const cv::Rect box = cv::boundingRect(mask);
-  if (box.empty()) return islands;
-  cv::Mat inverse, padded;
-  cv::bitwise_not(mask(box), inverse);
-  cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
-  cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
-  padded(cv::Rect(1, 1, box.width, box.height)).copyTo(islands(box));
-  return islands;
 }
 
 // Pixel count of a region over the area of its convex hull (the hull of each row's extreme

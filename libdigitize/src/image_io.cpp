@@ -158,7 +158,11 @@ Status WritePngRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& im
   return WritePixels(path, "png", spec, image.data.data());
 }
 
-Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
+namespace {
+
+// The checks every reader makes before decoding: the file exists, is not empty, OpenImageIO
+// opens it, and it is a 2D image. Errors name the file.
+Result<std::unique_ptr<OIIO::ImageInput>> OpenImage(const fs::path& path) {
   const std::string name = path.string();
   std::error_code ec;
   const auto file_status = fs::status(path, ec);
@@ -167,7 +171,6 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
   if (fs::is_regular_file(file_status) && fs::file_size(path, ec) == 0 && !ec) {
     return Error{name + ": empty file (0 bytes)"};
   }
-
   auto in = OIIO::ImageInput::open(name);
   if (!in) {
     return Error{name + ": unreadable, not an image OpenImageIO can open (" +
@@ -178,6 +181,31 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
     return Error{name + ": zero-sized or volume image (" + std::to_string(spec.width) + "x" +
                  std::to_string(spec.height) + "x" + std::to_string(spec.depth) + ")"};
   }
+  return std::move(in);
+}
+
+}  // namespace
+
+Result<ImageHeader> ReadImageHeader(const fs::path& path) {
+  auto in = OpenImage(path);
+  if (!in.ok()) return in.error();
+  const OIIO::ImageSpec& spec = (*in)->spec();
+  ImageHeader header;
+  header.width = spec.width;
+  header.height = spec.height;
+  header.channels = spec.nchannels;
+  header.integer_samples = IsIntegerType(spec.format);
+  header.format = (*in)->format_name();
+  (*in)->close();
+  return header;
+}
+
+Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
+  const std::string name = path.string();
+  auto opened = OpenImage(path);
+  if (!opened.ok()) return opened.error();
+  std::unique_ptr<OIIO::ImageInput> in = std::move(opened).value();
+  const OIIO::ImageSpec& spec = in->spec();
   // Checked before allocating: a corrupt header can claim billions of pixels.
   const auto pixels = static_cast<uint64_t>(spec.width) * static_cast<uint64_t>(spec.height);
   if (pixels > max_pixels) {

@@ -21,9 +21,7 @@ std::string Str(double v) {
   return s.str();
 }
 
-bool FiniteNonNegative(const Vec3f& x) {
-  return x.allFinite() && (x.array() >= 0.0f).all();
-}
+bool FiniteNonNegative(const Vec3f& x) { return x.allFinite() && (x.array() >= 0.0f).all(); }
 
 bool AboveHorizon(const Vec3f& v, const Vec3f& l) { return v.z() > 0.0f && l.z() > 0.0f; }
 
@@ -82,15 +80,19 @@ LobeDerivatives LafortuneLobeDerivatives(const LafortuneParams& p, const Vec3f& 
 
 Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rho_s, double cx,
                                              double cy, double cz, double k) {
-  if (!FiniteNonNegative(rho_d)) return Error{"general Lafortune lobe: rho_d must be finite and >= 0"};
-  if (!FiniteNonNegative(rho_s)) return Error{"general Lafortune lobe: rho_s must be finite and >= 0"};
+  if (!FiniteNonNegative(rho_d))
+    return Error{"general Lafortune lobe: rho_d must be finite and >= 0"};
+  if (!FiniteNonNegative(rho_s))
+    return Error{"general Lafortune lobe: rho_s must be finite and >= 0"};
   if (!(std::isfinite(cx) && std::isfinite(cy) && std::isfinite(cz)))
     return Error{"general Lafortune lobe: C must be finite, got (" + Str(cx) + ", " + Str(cy) +
                  ", " + Str(cz) + ")"};
-  if (!(std::isfinite(k) && k >= 0.0)) return Error{"general Lafortune lobe: k must be finite and >= 0, got " + Str(k)};
+  if (!(std::isfinite(k) && k >= 0.0))
+    return Error{"general Lafortune lobe: k must be finite and >= 0, got " + Str(k)};
   if (!(cz > 0.0))
-    return Error{"general Lafortune lobe: Cz = " + Str(cz) +
-                 " <= 0 has no cz = 1 form (a retro-reflective or grazing lobe; use the multi-lobe model)"};
+    return Error{
+        "general Lafortune lobe: Cz = " + Str(cz) +
+        " <= 0 has no cz = 1 form (a retro-reflective or grazing lobe; use the multi-lobe model)"};
   LafortuneParams p;
   p.rho_d = rho_d;
   p.cx = static_cast<float>(cx / cz);
@@ -113,7 +115,8 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
                    ") is beyond float's range"};
     // Below float's smallest normal the lobe contributes < 1e-38 / sr: 0 is the honest value.
     const double value = std::exp(log_value);
-    p.rho_s[c] = value < double(std::numeric_limits<float>::min()) ? 0.0f : static_cast<float>(value);
+    p.rho_s[c] =
+        value < double(std::numeric_limits<float>::min()) ? 0.0f : static_cast<float>(value);
   }
   return p;
 }
@@ -155,7 +158,8 @@ bool ParseNumber(std::string_view token, float* out) {
   if (token.empty()) return false;
   float value = 0;
   const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), value);
-  if (ec != std::errc() || end != token.data() + token.size() || !std::isfinite(value)) return false;
+  if (ec != std::errc() || end != token.data() + token.size() || !std::isfinite(value))
+    return false;
   *out = value;
   return true;
 }
@@ -167,14 +171,17 @@ std::string ParseRgb(std::string_view token, std::string_view field, Vec3f* out)
   size_t start = 0;
   while (true) {
     const size_t comma = token.find(',', start);
-    const std::string_view part = token.substr(start, comma == std::string_view::npos ? comma : comma - start);
-    if (count == 3) return std::string(field) + ": '" + std::string(token) + "' has more than 3 values";
+    const std::string_view part =
+        token.substr(start, comma == std::string_view::npos ? comma : comma - start);
+    if (count == 3)
+      return std::string(field) + ": '" + std::string(token) + "' has more than 3 values";
     parts[count++] = part;
     if (comma == std::string_view::npos) break;
     start = comma + 1;
   }
   if (count == 2)
-    return std::string(field) + ": '" + std::string(token) + "' has 2 values; expected 1 (grey) or 3 (R,G,B)";
+    return std::string(field) + ": '" + std::string(token) +
+           "' has 2 values; expected 1 (grey) or 3 (R,G,B)";
   for (int i = 0; i < count; ++i) {
     float value = 0;
     if (!ParseNumber(parts[i], &value))
@@ -200,15 +207,16 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
   };
   while (pos <= text.size()) {
     const size_t newline = text.find('\n', pos);
-    const std::string_view line =
-        text.substr(pos, newline == std::string_view::npos ? std::string_view::npos : newline - pos);
+    const std::string_view line = text.substr(
+        pos, newline == std::string_view::npos ? std::string_view::npos : newline - pos);
     pos = newline == std::string_view::npos ? text.size() + 1 : newline + 1;
     ++line_number;
     const std::vector<std::string_view> tokens = Tokens(line);
     if (tokens.empty() || tokens[0].front() == '#') continue;
     if (tokens.size() != 5)
-      return fail("expected 5 columns ('<material> diffuse R G B' or '<material> <lobe> Cxy Cz n'), got " +
-                  std::to_string(tokens.size()));
+      return fail(
+          "expected 5 columns ('<material> diffuse R G B' or '<material> <lobe> Cxy Cz n'), got " +
+          std::to_string(tokens.size()));
     const std::string name(tokens[0]);
     auto it = std::find_if(materials.begin(), materials.end(),
                            [&](const MeasuredLafortune& m) { return m.name == name; });
@@ -224,7 +232,8 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
       for (int c = 0; c < 3; ++c) {
         float value = 0;
         if (!ParseNumber(tokens[2 + c], &value))
-          return fail("diffuse of " + name + ": '" + std::string(tokens[2 + c]) + "' is not a finite number");
+          return fail("diffuse of " + name + ": '" + std::string(tokens[2 + c]) +
+                      "' is not a finite number");
         if (value < 0.0f) return fail("diffuse of " + name + ": albedo " + Str(value) + " < 0");
         albedo[c] = value;
       }
@@ -233,9 +242,11 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
       continue;
     }
     int lobe_index = -1;
-    const auto [end, ec] = std::from_chars(tokens[1].data(), tokens[1].data() + tokens[1].size(), lobe_index);
+    const auto [end, ec] =
+        std::from_chars(tokens[1].data(), tokens[1].data() + tokens[1].size(), lobe_index);
     if (ec != std::errc() || end != tokens[1].data() + tokens[1].size() || lobe_index < 0)
-      return fail("second column must be 'diffuse' or a lobe index >= 0, got '" + std::string(tokens[1]) + "'");
+      return fail("second column must be 'diffuse' or a lobe index >= 0, got '" +
+                  std::string(tokens[1]) + "'");
     if (static_cast<size_t>(lobe_index) != it->lobes.size())
       return fail("lobe " + std::to_string(lobe_index) + " of " + name + ": expected lobe " +
                   std::to_string(it->lobes.size()) + " (indices run 0, 1, 2, ... once each)");
@@ -251,12 +262,14 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
     it->lobes.push_back(lobe);
   }
   for (size_t i = 0; i < materials.size(); ++i)
-    if (!has_diffuse[i]) return Error{source + ": material " + materials[i].name + " has no diffuse row"};
+    if (!has_diffuse[i])
+      return Error{source + ": material " + materials[i].name + " has no diffuse row"};
   if (materials.empty()) return Error{source + ": no material rows"};
   return materials;
 }
 
-Result<std::vector<MeasuredLafortune>> ReadMeasuredLafortuneFits(const std::filesystem::path& path) {
+Result<std::vector<MeasuredLafortune>> ReadMeasuredLafortuneFits(
+    const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return Error{path.string() + ": cannot open"};
   std::ostringstream text;

@@ -1,7 +1,6 @@
 // Photo sets: the calibration JSON, RTI .lp captures, and their pixels as linear RGB.
 #include "digitize/photo_set.h"
 
-#include <OpenImageIO/imageio.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -104,44 +103,13 @@ const std::vector<float>& LinearLut(int max_code) {
   return max_code == 255 ? lut8 : lut16;
 }
 
-struct ImageHeader {
-  int width = 0, height = 0, channels = 0;
-  bool integer_samples = false;
-};
-
-bool IsIntegerType(OIIO::TypeDesc type) {
-  return type.basetype != OIIO::TypeDesc::FLOAT && type.basetype != OIIO::TypeDesc::HALF &&
-         type.basetype != OIIO::TypeDesc::DOUBLE;
-}
-
-std::string OneLine(std::string text) {
-  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
-  for (size_t pos; (pos = text.find('\n')) != std::string::npos;) text.replace(pos, 1, "; ");
-  return text;
-}
-
 // The header only (cheap), so that a missing, unreadable or wrongly sized image is reported
 // before seconds are spent decoding the others. Errors name the file.
 Result<ImageHeader> ReadHeader(const fs::path& path) {
   const std::string name = path.string();
-  std::error_code ec;
-  const auto status = fs::status(path, ec);
-  if (!fs::exists(status)) return Error{name + ": no such file"};
-  if (fs::is_directory(status)) return Error{name + ": is a directory, not an image"};
-  if (fs::is_regular_file(status) && fs::file_size(path, ec) == 0 && !ec) {
-    return Error{name + ": empty file (0 bytes)"};
-  }
-  auto in = OIIO::ImageInput::open(name);
-  if (!in) {
-    return Error{name + ": unreadable, not an image OpenImageIO can open (" +
-                 OneLine(OIIO::geterror()) + ")"};
-  }
-  const OIIO::ImageSpec& spec = in->spec();
-  ImageHeader header{spec.width, spec.height, spec.nchannels, IsIntegerType(spec.format)};
-  in->close();
-  if (header.width <= 0 || header.height <= 0) {
-    return Error{name + ": zero-sized image (" + Size(header.width, header.height) + ")"};
-  }
+  auto read = ReadImageHeader(path);
+  if (!read.ok()) return read.error();
+  const ImageHeader header = *read;
   if (header.channels != 1 && header.channels != 3) {
     return Error{name + ": " + std::to_string(header.channels) +
                  " channels; photos must be 1-channel (grey) or 3-channel (RGB)"};

@@ -16,6 +16,7 @@
 //    large (kUnfilled), the rest small (kFilled). Every hole is filled by push-pull interpolation
 //    relaxed towards a membrane (harmonic) fill, one component per task.
 #include "digitize/resample.h"
+#include "mask_ops.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
@@ -187,20 +188,6 @@ void DrawFootprint(TexelPoint a, TexelPoint b, TexelPoint c, TexelPoint d, int m
       for (int i = i0; i <= i1; ++i)
         if (setup.At(i, j) > kLowest) grid[static_cast<size_t>(j) * w + i] = 255;
   }
-}
-
-// Pixels of `mask` (0/255) not reachable from the border through non-mask pixels -> 255.
-cv::Mat EnclosedIslands(const cv::Mat& mask) {
-  cv::Mat islands = cv::Mat::zeros(mask.size(), CV_8U);
-  // Islands lie inside the mask's bounding rectangle: flood only that part.
-  const cv::Rect box = cv::boundingRect(mask);
-  if (box.empty()) return islands;
-  cv::Mat inverse, padded;
-  cv::bitwise_not(mask(box), inverse);
-  cv::copyMakeBorder(inverse, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(255));
-  cv::floodFill(padded, cv::Point(0, 0), cv::Scalar(0), nullptr, cv::Scalar(0), cv::Scalar(0), 8);
-  padded(cv::Rect(1, 1, box.width, box.height)).copyTo(islands(box));
-  return islands;
 }
 
 // Scratch space of the hole filler, one per thread (no per-hole allocation in steady state).

@@ -99,30 +99,30 @@ struct BrdfSamples {
 };
 
 enum class BrdfFitMethod : uint8_t {
-  kFast,             // variable projection + small LM (default)
-  kCeresReference,   // ceres::Solve, autodiff, DENSE_QR
+  kFast,            // variable projection + small LM (default)
+  kCeresReference,  // ceres::Solve, autodiff, DENSE_QR
 };
 
 struct BrdfFitOptions {
   BrdfFitMethod method = BrdfFitMethod::kFast;
-  int min_samples = 8;                   // valid samples per texel needed to fit a lobe (9 unknowns
-                                         // share 3 x samples residuals)
-  double noise_sigma = 0.002;            // std of the radiance noise per channel, radiance units
-                                         // (0.002 ~ 8-bit quantisation + sensor at mid-grey, 0..1)
-  double diffuse_chi2_sigmas = 3.0;      // a diffuse fit "explains the samples" when its squared
-                                         // error is below the chi-square mean + this many stds;
-                                         // < 0 disables the diffuse-only shortcut
+  int min_samples = 8;               // valid samples per texel needed to fit a lobe (9 unknowns
+                                     // share 3 x samples residuals)
+  double noise_sigma = 0.002;        // std of the radiance noise per channel, radiance units
+                                     // (0.002 ~ 8-bit quantisation + sensor at mid-grey, 0..1)
+  double diffuse_chi2_sigmas = 3.0;  // a diffuse fit "explains the samples" when its squared
+                                     // error is below the chi-square mean + this many stds;
+                                     // < 0 disables the diffuse-only shortcut
   double saturation_radiance = std::numeric_limits<double>::infinity();
-                                         // a sample with any channel >= this is clipped and dropped
-  double k_min = 0.5;                    // lobe exponent bounds (dimensionless)
+  // a sample with any channel >= this is clipped and dropped
+  double k_min = 0.5;  // lobe exponent bounds (dimensionless)
   double k_max = 1.0e4;
-  double max_specular_albedo = 1.0;      // energy bound: rho_s 2 pi / (k + 2) <= this (the lobe's
-                                         // reflected fraction at normal view; radiance / E units)
-  double lobe_prior_weight = 0.02;       // pull of (cx, cy) towards (-1, -1), see above
-  double specular_prior_weight = 1.0;    // cost, in noise variances (noise_sigma^2), of a
-                                         // specular albedo of 0.1 per channel, see above
-  int max_iterations = 50;               // per texel, either path
-  int num_threads = 0;                   // worker threads; 0 = all cores
+  double max_specular_albedo = 1.0;    // energy bound: rho_s 2 pi / (k + 2) <= this (the lobe's
+                                       // reflected fraction at normal view; radiance / E units)
+  double lobe_prior_weight = 0.02;     // pull of (cx, cy) towards (-1, -1), see above
+  double specular_prior_weight = 1.0;  // cost, in noise variances (noise_sigma^2), of a
+                                       // specular albedo of 0.1 per channel, see above
+  int max_iterations = 50;             // per texel, either path
+  int num_threads = 0;                 // worker threads; 0 = all cores
   Status Validate() const;
 };
 
@@ -138,12 +138,12 @@ inline constexpr int kTexelFitStatusCount = 6;
 const char* ToString(TexelFitStatus status);  // "converged", "diffuse-only", "too few samples", ...
 
 struct TexelFit {
-  LafortuneParams params;             // stored gauge, finite
+  LafortuneParams params;  // stored gauge, finite
   TexelFitStatus status = TexelFitStatus::kTooFewSamples;
-  float rms_error = 0;                // radiance RMS over the used samples and 3 channels
-  int samples_used = 0;               // after dropping invalid and saturated ones
-  int samples_saturated = 0;          // dropped as clipped
-  int iterations = 0;                 // solver iterations (0 when no lobe was fitted)
+  float rms_error = 0;        // radiance RMS over the used samples and 3 channels
+  int samples_used = 0;       // after dropping invalid and saturated ones
+  int samples_saturated = 0;  // dropped as clipped
+  int iterations = 0;         // solver iterations (0 when no lobe was fitted)
 };
 
 struct BrdfFitSummary {
@@ -151,18 +151,18 @@ struct BrdfFitSummary {
   size_t texels = 0;
   std::array<size_t, kTexelFitStatusCount> count_by_status{};  // indexed by TexelFitStatus
   size_t samples_total = 0, samples_used = 0, samples_saturated = 0;
-  double mean_rms_error = 0;          // over texels, radiance units
-  double mean_iterations = 0;         // over texels with a lobe fit
-  double seconds = 0;                 // wall time of FitBrdf
+  double mean_rms_error = 0;   // over texels, radiance units
+  double mean_iterations = 0;  // over texels with a lobe fit
+  double seconds = 0;          // wall time of FitBrdf
   size_t count(TexelFitStatus s) const { return count_by_status[static_cast<size_t>(s)]; }
   // "97.8 % converged, 1.9 % diffuse-only, 0.3 % too few samples; 41 s" (zero classes left out).
   std::string BriefReport() const;
 };
 
 struct BrdfFitResult {
-  std::vector<LafortuneParams> params;   // one per texel, stored gauge (cz = 1)
-  std::vector<TexelFitStatus> status;    // one per texel
-  std::vector<float> rms_error;          // one per texel, radiance units
+  std::vector<LafortuneParams> params;  // one per texel, stored gauge (cz = 1)
+  std::vector<TexelFitStatus> status;   // one per texel
+  std::vector<float> rms_error;         // one per texel, radiance units
   BrdfFitSummary summary;
 };
 

@@ -46,6 +46,14 @@ struct FloatImage {
   ImageMetadata metadata;
 };
 // Errors name the file: missing, unreadable, truncated, zero-sized or larger than max_pixels.
+// The header alone (cheap: nothing is decoded), with the same file checks as ReadImage.
+struct ImageHeader {
+  int width = 0, height = 0, channels = 0;
+  bool integer_samples = false;  // 8/16-bit integers (not float or half)
+  std::string format;            // "openexr", "png", ...
+};
+Result<ImageHeader> ReadImageHeader(const std::filesystem::path& path);
+
 Result<FloatImage> ReadImage(const std::filesystem::path& path, size_t max_pixels = size_t{1} << 28);
 
 }  // namespace digitize

@@ -94,9 +94,10 @@ Vec3f EvaluateLafortune(const LafortuneParams& params, const Vec3f& v, const Vec
 struct LobeDerivatives {
   double value = 0;  // max(0, base)^k
   double d_cx = 0, d_cy = 0, d_cz = 0;
-  double d_k = 0;    // d/dk = value * log(base)
+  double d_k = 0;  // d/dk = value * log(base)
 };
-LobeDerivatives LafortuneLobeDerivatives(const LafortuneParams& params, const Vec3f& v, const Vec3f& l);
+LobeDerivatives LafortuneLobeDerivatives(const LafortuneParams& params, const Vec3f& v,
+                                         const Vec3f& l);
 
 // General (ungauged) one-lobe form: f = rho_d + rho_s * max(0, C . (v * l))^k, C = (cx, cy, cz).
 // Converts to the stored gauge (cz = 1) without changing the function: C' = C / cz,
@@ -109,8 +110,8 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
 // ---------------------------------------------------------------------------------------------
 // Multi-lobe Lafortune (the published 3-lobe fits in ../shared/data/lafortune_measured_fits.txt).
 //
-// Per channel c: f_c = diffuse_albedo_c / pi + sum_i max(0, cxy_ic (vx lx + vy ly) + cz_ic vz lz)^n_ic.
-// Convention: the file lists the diffuse term as an ALBEDO; the renderers that ship these
+// Per channel c: f_c = diffuse_albedo_c / pi + sum_i max(0, cxy_ic (vx lx + vy ly) + cz_ic vz
+// lz)^n_ic. Convention: the file lists the diffuse term as an ALBEDO; the renderers that ship these
 // numbers (pbrt-v1 `Lafortune::f`, LuxRender) return `R * INV_PI + sum of lobes`, so the BRDF's
 // diffuse value is albedo / pi. Each lobe's weight is folded into C (no separate rho_s), and
 // lobes may have cz <= 0 (e.g. felt's retro-reflective lobe), which is why this is not a sum of
