@@ -142,7 +142,8 @@ void WriteCsv(const std::filesystem::path& path, const std::vector<Row>& rows) {
   out << "scan_px,noise_mm,texels";
   for (const std::string& s : kSteps) out << "," << s << "_s";
   out << ",total_s,read_exr_s,write_exr_s,tilt_err_deg,mask_iou,frame_px_kept,height_rmse_mm,"
-         "height_offset_mm,normals_median_deg,normals_p90_deg,relief_texels,relief_uncovered\n";
+         "height_offset_mm,normals_median_deg,normals_p90_deg,relief_texels,relief_uncovered,"
+         "frame_px_max_height_mm\n";
   for (const Row& r : rows) {
     out << r.scan_px << "," << r.noise_mm << "," << r.texels;
     for (const std::string& s : kSteps) out << "," << r.step_seconds.at(s);
@@ -150,7 +151,8 @@ void WriteCsv(const std::filesystem::path& path, const std::vector<Row>& rows) {
     out << "," << r.total_seconds << "," << r.read_seconds << "," << r.write_seconds << ","
         << a.normal_error_deg << "," << a.mask_iou << "," << a.frame_pixels_kept << ","
         << a.height_rmse_mm << "," << a.height_offset_mm << "," << a.normals_median_deg << ","
-        << a.normals_p90_deg << "," << a.relief_texels_true << "," << a.relief_texels_uncovered << "\n";
+        << a.normals_p90_deg << "," << a.relief_texels_true << "," << a.relief_texels_uncovered << ","
+        << a.frame_pixels_max_height_mm << "\n";
   }
   std::ofstream(path) << out.str();
   std::printf("wrote %s\n", path.c_str());

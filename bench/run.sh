@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Runs the benchmarks and redraws the plots in docs/. Extra arguments go to preprocess_bench
-# (e.g. --sizes=512,2048 for a quick run).
+# (e.g. --sizes=512,2048 for a quick run). Run on an otherwise idle machine: ratios and times
+# are only comparable within one run.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./build/bin/preprocess_bench --csv-dir=docs "$@" | tee docs/bench_preprocess.txt
 gnuplot bench/plot.gp && echo "wrote docs/bench_preprocess.png"
+./build/bin/brdf_fit_bench --csv-dir=docs | tee docs/bench_brdf_fit.txt

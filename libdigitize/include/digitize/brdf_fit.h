@@ -112,8 +112,9 @@ struct BrdfFitOptions {
   double diffuse_chi2_sigmas = 3.0;  // a diffuse fit "explains the samples" when its squared
                                      // error is below the chi-square mean + this many stds;
                                      // < 0 disables the diffuse-only shortcut
+  // Radiance (units of the samples) at which the sensor clips: a sample with any channel >= this
+  // is dropped and counted; +inf = no clipping.
   double saturation_radiance = std::numeric_limits<double>::infinity();
-  // a sample with any channel >= this is clipped and dropped
   double k_min = 0.5;  // lobe exponent bounds (dimensionless)
   double k_max = 1.0e4;
   double max_specular_albedo = 1.0;    // energy bound: rho_s 2 pi / (k + 2) <= this (the lobe's
