@@ -15,12 +15,6 @@
 namespace digitize {
 namespace {
 
-std::string Str(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-
 bool FiniteNonNegative(const Vec3f& x) { return x.allFinite() && (x.array() >= 0.0f).all(); }
 
 bool AboveHorizon(const Vec3f& v, const Vec3f& l) { return v.z() > 0.0f && l.z() > 0.0f; }
@@ -36,15 +30,15 @@ float Capped(float f) {
 
 Status LafortuneParams::Validate() const {
   if (!FiniteNonNegative(rho_d))
-    return Error{"rho_d must be finite and >= 0 (1/sr), got (" + Str(rho_d.x()) + ", " +
-                 Str(rho_d.y()) + ", " + Str(rho_d.z()) + ")"};
+    return Error{"rho_d must be finite and >= 0 (1/sr), got (" + FormatNumber(rho_d.x()) + ", " +
+                 FormatNumber(rho_d.y()) + ", " + FormatNumber(rho_d.z()) + ")"};
   if (!FiniteNonNegative(rho_s))
-    return Error{"rho_s must be finite and >= 0 (1/sr), got (" + Str(rho_s.x()) + ", " +
-                 Str(rho_s.y()) + ", " + Str(rho_s.z()) + ")"};
+    return Error{"rho_s must be finite and >= 0 (1/sr), got (" + FormatNumber(rho_s.x()) + ", " +
+                 FormatNumber(rho_s.y()) + ", " + FormatNumber(rho_s.z()) + ")"};
   if (!std::isfinite(cx) || !std::isfinite(cy))
-    return Error{"cx, cy must be finite, got " + Str(cx) + ", " + Str(cy)};
-  if (cz != 1.0f) return Error{"cz must be 1 (the stored gauge), got " + Str(cz)};
-  if (!(std::isfinite(k) && k >= 0.0f)) return Error{"k must be finite and >= 0, got " + Str(k)};
+    return Error{"cx, cy must be finite, got " + FormatNumber(cx) + ", " + FormatNumber(cy)};
+  if (cz != 1.0f) return Error{"cz must be 1 (the stored gauge), got " + FormatNumber(cz)};
+  if (!(std::isfinite(k) && k >= 0.0f)) return Error{"k must be finite and >= 0, got " + FormatNumber(k)};
   return Status::Ok();
 }
 
@@ -85,13 +79,13 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
   if (!FiniteNonNegative(rho_s))
     return Error{"general Lafortune lobe: rho_s must be finite and >= 0"};
   if (!(std::isfinite(cx) && std::isfinite(cy) && std::isfinite(cz)))
-    return Error{"general Lafortune lobe: C must be finite, got (" + Str(cx) + ", " + Str(cy) +
-                 ", " + Str(cz) + ")"};
+    return Error{"general Lafortune lobe: C must be finite, got (" + FormatNumber(cx) + ", " + FormatNumber(cy) +
+                 ", " + FormatNumber(cz) + ")"};
   if (!(std::isfinite(k) && k >= 0.0))
-    return Error{"general Lafortune lobe: k must be finite and >= 0, got " + Str(k)};
+    return Error{"general Lafortune lobe: k must be finite and >= 0, got " + FormatNumber(k)};
   if (!(cz > 0.0))
     return Error{
-        "general Lafortune lobe: Cz = " + Str(cz) +
+        "general Lafortune lobe: Cz = " + FormatNumber(cz) +
         " <= 0 has no cz = 1 form (a retro-reflective or grazing lobe; use the multi-lobe model)"};
   LafortuneParams p;
   p.rho_d = rho_d;
@@ -100,7 +94,7 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
   p.cz = 1.0f;
   p.k = static_cast<float>(k);
   if (!std::isfinite(p.cx) || !std::isfinite(p.cy))
-    return Error{"general Lafortune lobe: C / Cz overflows float (Cz = " + Str(cz) + ")"};
+    return Error{"general Lafortune lobe: C / Cz overflows float (Cz = " + FormatNumber(cz) + ")"};
   // (s C . x)^k = s^k (C . x)^k with s = 1 / cz, so rho_s' = rho_s cz^k; in log space because
   // cz^k alone over- or underflows long before the product does.
   const double log_scale = k * std::log(cz);
@@ -111,7 +105,7 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
     }
     const double log_value = std::log(double(rho_s[c])) + log_scale;
     if (log_value > std::log(double(std::numeric_limits<float>::max())))
-      return Error{"general Lafortune lobe: rho_s * Cz^k = exp(" + Str(log_value) +
+      return Error{"general Lafortune lobe: rho_s * Cz^k = exp(" + FormatNumber(log_value) +
                    ") is beyond float's range"};
     // Below float's smallest normal the lobe contributes < 1e-38 / sr: 0 is the honest value.
     const double value = std::exp(log_value);
@@ -234,7 +228,7 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
         if (!ParseNumber(tokens[2 + c], &value))
           return fail("diffuse of " + name + ": '" + std::string(tokens[2 + c]) +
                       "' is not a finite number");
-        if (value < 0.0f) return fail("diffuse of " + name + ": albedo " + Str(value) + " < 0");
+        if (value < 0.0f) return fail("diffuse of " + name + ": albedo " + FormatNumber(value) + " < 0");
         albedo[c] = value;
       }
       it->diffuse_albedo = albedo;

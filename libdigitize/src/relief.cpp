@@ -23,12 +23,6 @@
 namespace digitize {
 namespace {
 
-std::string Str(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-
 // A texel takes part when it has a height. A non-finite height breaks the HeightField
 // invariant; it is ignored rather than allowed to poison H (and every box with it).
 inline bool Usable(TexelState s, float h) { return HasHeight(s) && std::isfinite(h); }
@@ -46,16 +40,16 @@ struct CellPeak {
 Status ReliefOptions::Validate() const {
   if (!(std::isfinite(delta0_fraction) && delta0_fraction >= 0.0 && delta0_fraction <= 1.0))
     return Error{"delta0_fraction must be in [0, 1] (fraction of the max canvas height), got " +
-                 Str(delta0_fraction)};
+                 FormatNumber(delta0_fraction)};
   if (!(std::isfinite(min_component_area_mm2) && min_component_area_mm2 >= 0.0))
     return Error{"min_component_area_mm2 must be a finite area >= 0 mm^2, got " +
-                 Str(min_component_area_mm2)};
+                 FormatNumber(min_component_area_mm2)};
   if (cell_px < 1) return Error{"cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!(std::isfinite(noise_margin_mm) && noise_margin_mm >= 0.0))
-    return Error{"noise_margin_mm must be a finite height >= 0 mm, got " + Str(noise_margin_mm)};
+    return Error{"noise_margin_mm must be a finite height >= 0 mm, got " + FormatNumber(noise_margin_mm)};
   if (cover_px < 0) return Error{"cover_px must be >= 0 texels, got " + std::to_string(cover_px)};
   if (!(std::isfinite(min_relief_mm) && min_relief_mm >= 0.0))
-    return Error{"min_relief_mm must be a finite height >= 0 mm, got " + Str(min_relief_mm)};
+    return Error{"min_relief_mm must be a finite height >= 0 mm, got " + FormatNumber(min_relief_mm)};
   return Status::Ok();
 }
 
@@ -67,7 +61,7 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
                      field.state.size() == field.height_mm.size(),
                  "ClassifyRelief: state and height grids differ in size");
   DIGITIZE_CHECK(w == 0 || h == 0 || (std::isfinite(field.pitch_mm) && field.pitch_mm > 0),
-                 "ClassifyRelief: pitch_mm must be finite and > 0, got " + Str(field.pitch_mm));
+                 "ClassifyRelief: pitch_mm must be finite and > 0, got " + FormatNumber(field.pitch_mm));
 
   const int n = options.cell_px;
   ReliefResult result;

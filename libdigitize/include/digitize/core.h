@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -148,6 +149,13 @@ struct RigidTransform {
 // Angle in degrees between two directions (unsigned, robust near 0 and 180).
 inline double AngleDeg(const Vec3d& a, const Vec3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / 3.14159265358979323846;
+}
+
+// Shortest round-trip-ish text of a number for messages ("0.25", "1e+30", "nan").
+inline std::string FormatNumber(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
 }
 
 // ---------------------------------------------------------------------------------------------
