@@ -97,7 +97,9 @@ struct Grid {
   std::vector<T> data;
 
   Grid() = default;
-  Grid(int w, int h, const T& fill = T{}) : width(w), height(h) {
+  // Without a fill value cells are zero: Eigen's T{} would leave vectors uninitialised.
+  Grid(int w, int h) : Grid(w, h, Zero()) {}
+  Grid(int w, int h, const T& fill) : width(w), height(h) {
     DIGITIZE_CHECK(w >= 0 && h >= 0, "negative grid size");
     data.assign(static_cast<size_t>(w) * static_cast<size_t>(h), fill);
   }
@@ -110,6 +112,13 @@ struct Grid {
   T& operator()(int x, int y) { return data[Index(x, y)]; }
   const T& operator()(int x, int y) const { return data[Index(x, y)]; }
   T* Row(int y) { return data.data() + Index(0, y); }
+  static T Zero() {
+    if constexpr (requires { T::Zero(); }) {
+      return T::Zero();
+    } else {
+      return T{};
+    }
+  }
   const T* Row(int y) const { return data.data() + Index(0, y); }
 };
 
