@@ -67,6 +67,9 @@ void AddPreprocessFlags(CLI::App* c, PreprocessOptions& o) {
   c->add_option("--stop-gradient-mm", o.canvas.stop_gradient_mm,
                 "Sobel magnitude (mm of height per pixel) that stops the canvas region growing")
       ->capture_default_str()->group("Canvas");
+  c->add_option("--stop-slope", o.canvas.stop_slope,
+                "Surface slope (height / in-plane distance) that also stops the growing: frame walls")
+      ->capture_default_str()->group("Canvas");
   c->add_option("--refine-step-mm", o.canvas.refine_step_mm,
                 "Height step (mm) the canvas boundary refinement will not cross")
       ->capture_default_str()->group("Canvas");
@@ -97,6 +100,13 @@ void AddPreprocessFlags(CLI::App* c, PreprocessOptions& o) {
                 "Relief components smaller than this (mm^2) are removed as specks")
       ->capture_default_str()->group("Relief");
   c->add_option("--cell-px", o.relief.cell_px, "Box cell size n (texels): n x n cells become boxes")
+      ->capture_default_str()->group("Relief");
+  c->add_option("--cover-px", o.relief.cover_px,
+                "Boxes cover the relief grown by this many texels (0 = exactly the relief)")
+      ->capture_default_str()->group("Relief");
+  c->add_option("--min-relief-mm", o.relief.min_relief_mm,
+                "A canvas whose highest point is not above this (mm; at least 8 sigma of the noise) "
+                "has no relief boxes")
       ->capture_default_str()->group("Relief");
   c->add_flag("!--no-noise-margin", o.noise_margin_from_scan,
               "Classify relief exactly at delta0 instead of delta0 - 2 sigma(noise)")
