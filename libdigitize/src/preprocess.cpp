@@ -214,6 +214,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
         {"canvas",
          {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
+          {"stop_slope", options.canvas.stop_slope},
           {"refine_step_mm", options.canvas.refine_step_mm},
           {"refine_px", options.canvas.refine_px},
           {"erode_px", options.canvas.erode_px},
@@ -227,6 +228,8 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
          {{"delta0_fraction", options.relief.delta0_fraction},
           {"min_component_area_mm2", options.relief.min_component_area_mm2},
           {"cell_px", options.relief.cell_px},
+          {"cover_px", options.relief.cover_px},
+          {"min_relief_mm", options.relief.min_relief_mm},
           {"noise_margin_from_scan", options.noise_margin_from_scan}}}}},
   };
   return report.dump(2) + "\n";
