@@ -181,7 +181,7 @@ Result<std::unique_ptr<OIIO::ImageInput>> OpenImage(const fs::path& path) {
     return Error{name + ": zero-sized or volume image (" + std::to_string(spec.width) + "x" +
                  std::to_string(spec.height) + "x" + std::to_string(spec.depth) + ")"};
   }
-  return std::move(in);
+  return in;
 }
 
 }  // namespace
