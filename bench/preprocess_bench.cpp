@@ -66,27 +66,33 @@ void RecordSteps(const PreprocessResult& r, Row& row, int iterations) {
   row.total_seconds += r.total_seconds / iterations;
 }
 
+// The timed loop of both benchmarks: the copy of the input scans is not preprocessing.
+// Returns false (and marks the benchmark failed) on an error.
+bool TimePreprocess(benchmark::State& state, const Case& c, PreprocessResult& last, Row* row) {
+  const PreprocessOptions options;
+  for (auto _ : state) {
+    state.PauseTiming();
+    std::vector<Scan> scans = c.scan.exposures;
+    state.ResumeTiming();
+    Result<PreprocessResult> r = Preprocess(std::move(scans), options);
+    if (!r.ok()) {
+      state.SkipWithError(r.error().message.c_str());
+      return false;
+    }
+    last = std::move(r).value();
+    if (row) RecordSteps(last, *row, static_cast<int>(state.max_iterations));
+  }
+  return true;
+}
+
 void BM_PreprocessSize(benchmark::State& state) {
   const int px = static_cast<int>(state.range(0));
   const auto c = MakeCase(px, 0.02, 7);
   Row row;
   row.scan_px = px;
   row.noise_mm = 0.02;
-  const PreprocessOptions options;
   PreprocessResult last;
-  for (auto _ : state) {
-    state.PauseTiming();  // the copy of the input is not preprocessing
-    std::vector<Scan> scans = c->scan.exposures;
-    state.ResumeTiming();
-    Result<PreprocessResult> r = Preprocess(std::move(scans), options);
-    if (!r.ok()) {
-      state.SkipWithError(r.error().message.c_str());
-      return;
-    }
-    last = std::move(r).value();
-    // Per-step times: mean over the timed iterations (Preprocess times its own steps).
-    RecordSteps(last, row, static_cast<int>(state.max_iterations));
-  }
+  if (!TimePreprocess(state, *c, last, &row)) return;
   row.texels = last.field.height_mm.size();
   row.accuracy = synth::MeasureAccuracy(last, c->painting, c->scan);
 
@@ -111,19 +117,8 @@ void BM_PreprocessSize(benchmark::State& state) {
 void BM_PreprocessNoise(benchmark::State& state) {
   const double noise_mm = static_cast<double>(state.range(0)) / 1000.0;
   const auto c = MakeCase(1024, noise_mm, 11);
-  PreprocessOptions options;
   PreprocessResult last;
-  for (auto _ : state) {
-    state.PauseTiming();  // the copy of the input is not preprocessing
-    std::vector<Scan> scans = c->scan.exposures;
-    state.ResumeTiming();
-    Result<PreprocessResult> r = Preprocess(std::move(scans), options);
-    if (!r.ok()) {
-      state.SkipWithError(r.error().message.c_str());
-      return;
-    }
-    last = std::move(r).value();
-  }
+  if (!TimePreprocess(state, *c, last, nullptr)) return;
   Row row;
   row.scan_px = 1024;
   row.noise_mm = noise_mm;

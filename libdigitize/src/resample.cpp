@@ -111,6 +111,23 @@ inline int CeilFrom(float v) {
   return f + (static_cast<float>(f) < v);
 }
 
+// Texel rectangle [i0, i1] x [j0, j1] of a bounding box (texel coordinates) inside the band of
+// rows row0..row1 of a grid w wide. Clamped to just outside the band first, so the integer
+// conversions are plain truncations. False when nothing is left.
+struct TexelRect {
+  int i0 = 0, i1 = -1, j0 = 0, j1 = -1;
+};
+inline bool ClampToBand(float minx, float maxx, float miny, float maxy, int w, int row0, int row1,
+                        TexelRect& rect) {
+  minx = std::max(minx, -1.f), maxx = std::min(maxx, static_cast<float>(w));
+  miny = std::max(miny, static_cast<float>(row0 - 1));
+  maxy = std::min(maxy, static_cast<float>(row1 + 1));
+  if (!(minx <= maxx && miny <= maxy)) return false;
+  rect.i0 = std::max(0, CeilFrom(minx)), rect.i1 = std::min(w - 1, FloorFrom(maxx));
+  rect.j0 = std::max(row0, CeilFrom(miny)), rect.j1 = std::min(row1, FloorFrom(maxy));
+  return rect.i0 <= rect.i1 && rect.j0 <= rect.j1;
+}
+
 // Linear interpolation over one triangle at texel centres. Edge functions relative to vertex a
 // in float: differences of nearby coordinates are exact. At() gives kLowest outside.
 struct TriangleSetup {
@@ -175,17 +192,13 @@ void DrawFootprint(TexelPoint a, TexelPoint b, TexelPoint c, TexelPoint d, int m
   }
   for (int t = 0; t < ntri; ++t) {
     const TexelPoint &p = *tri[t][0], &q = *tri[t][1], &r = *tri[t][2];
-    float minx = std::min({p.x, q.x, r.x}), maxx = std::max({p.x, q.x, r.x});
-    float miny = std::min({p.y, q.y, r.y}), maxy = std::max({p.y, q.y, r.y});
-    minx = std::max(minx, -1.f), maxx = std::min(maxx, static_cast<float>(w));
-    miny = std::max(miny, static_cast<float>(row0 - 1));
-    maxy = std::min(maxy, static_cast<float>(row1 + 1));
-    if (!(minx <= maxx && miny <= maxy)) continue;
-    const int i0 = std::max(0, CeilFrom(minx)), i1 = std::min(w - 1, FloorFrom(maxx));
-    const int j0 = std::max(row0, CeilFrom(miny)), j1 = std::min(row1, FloorFrom(maxy));
+    TexelRect rect;
+    if (!ClampToBand(std::min({p.x, q.x, r.x}), std::max({p.x, q.x, r.x}),
+                     std::min({p.y, q.y, r.y}), std::max({p.y, q.y, r.y}), w, row0, row1, rect))
+      continue;
     const TriangleSetup setup(p, q, r);
-    for (int j = j0; j <= j1; ++j)
-      for (int i = i0; i <= i1; ++i)
+    for (int j = rect.j0; j <= rect.j1; ++j)
+      for (int i = rect.i0; i <= rect.i1; ++i)
         if (setup.At(i, j) > kLowest) grid[static_cast<size_t>(j) * w + i] = 255;
   }
 }
@@ -592,20 +605,14 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
                   minx = std::min(minx, tri[t][k]->x), maxx = std::max(maxx, tri[t][k]->x);
                   miny = std::min(miny, tri[t][k]->y), maxy = std::max(maxy, tri[t][k]->y);
                 }
-              // Clamp to just outside the band so the integer conversions are plain truncations.
-              minx = std::max(minx, -1.f), maxx = std::min(maxx, static_cast<float>(w));
-              miny = std::max(miny, static_cast<float>(row0 - 1));
-              maxy = std::min(maxy, static_cast<float>(row1 + 1));
-              if (!(minx <= maxx && miny <= maxy)) continue;
-              const int i0 = std::max(0, CeilFrom(minx)), i1 = std::min(w - 1, FloorFrom(maxx));
-              const int j0 = std::max(row0, CeilFrom(miny)), j1 = std::min(row1, FloorFrom(maxy));
-              if (i0 > i1 || j0 > j1) continue;
+              TexelRect rect;
+              if (!ClampToBand(minx, maxx, miny, maxy, w, row0, row1, rect)) continue;
               TriangleSetup setup[2];
               for (int t = 0; t < ntri; ++t)
                 setup[t] = TriangleSetup(*tri[t][0], *tri[t][1], *tri[t][2]);
-              for (int j = j0; j <= j1; ++j) {
+              for (int j = rect.j0; j <= rect.j1; ++j) {
                 float* row = out + static_cast<size_t>(j) * w;
-                for (int i = i0; i <= i1; ++i) {
+                for (int i = rect.i0; i <= rect.i1; ++i) {
                   float value = kLowest;
                   for (int t = 0; t < ntri; ++t) value = std::max(value, setup[t].At(i, j));
                   row[i] = std::max(row[i], value);
