@@ -1,0 +1,120 @@
+// Synthetic photo sets of a synthetic painting (issue 3 section 1): registered photographs under
+// known point lights, rendered with Embree from the framed-painting Scene (scan_sim.h), with their
+// ground truth -- per-texel reflectance by paint region, and held-out images (lights and views
+// not in the fitting set) rendered without noise for judging a fit.
+//
+// Rendering, per image pixel (pixel centres, one ray, OpenCV camera convention of photo_set.h):
+//   - the camera ray is traced in the Scene (canvas + frame + wall);
+//   - on the canvas: the texel is the nearest texel of the hit (paint regions and materials are per
+//     texel), the normal the painting's analytic normal interpolated bilinearly at the hit, the
+//     tangent frame MakeTangentFrame(normal) (tangent_frame.h); the light is a point light,
+//     radiance = f_r(v, l) * max(0, n.l) * I / d^2 with f_r the texel's material (0 if n.v <= 0);
+//   - frame and wall: Lambertian grey (albedo frame_albedo), same light;
+//   - shadows (on by default): a ray from the hit towards the light against the whole Scene, so the
+//     relief AND the frame cast shadows (the fit only knows the relief: frame shadows are what its
+//     robustness has to cope with, and the held-out masks leave them out of the score);
+//   - then (fitting images only) Gaussian noise of noise_sigma (linear units), then the encoding:
+//     8-bit or 16-bit sRGB (quantised, clipped at 1: code 255 / 65535 = saturated), or linear
+//     float (EXR; no clipping).
+// Deterministic for a seed, independent of thread scheduling.
+//
+// Frames: cameras and lights are placed in the CANVAS frame (around the canvas centre, on the
+// front side) and stored in the SCAN frame of the given canvas_from_scan (scan = canvas when it is
+// the identity), as a calibration file stores them.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/lafortune.h"
+#include "digitize/photo_set.h"
+#include "digitize/reflectance_maps.h"
+#include "digitize_synth/scan_sim.h"
+
+namespace digitize::synth {
+
+// Ground-truth reflectance of one paint region: the fitted family (one-lobe Lafortune, stored
+// gauge) or, to judge the fit where the model cannot match, a measured 3-lobe Lafortune fit.
+struct PaintMaterial {
+  std::string name;           // "matte", "satin", ..., "bluepaint (measured)"
+  bool is_measured = false;   // true: `measured` is the truth, `lafortune` unused
+  LafortuneParams lafortune;  // cz = 1
+  MeasuredLafortune measured;
+  Vec3f Evaluate(const Vec3f& v, const Vec3f& l) const;  // tangent frame, 1/sr
+};
+
+// Region materials, matte to glossy varnish: region i gets materials[i % size]. Colours differ per
+// region. One-lobe set (k ~ 2 .. ~500, isotropic and anisotropic lobes, off-specular cx != -1,
+// black paint in none); with `with_measured` the last region is a published measured paint
+// (bluepaint, Lafortune et al. 1997; its numbers are embedded), not in the fitted family.
+std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured);
+
+enum class PhotoEncoding { kSrgb8, kSrgb16, kLinearExr };
+const char* ToString(PhotoEncoding e);  // "srgb8", "srgb16", "exr"
+
+struct PhotoSimOptions {
+  // Cameras (pinhole) on an arc in the canvas XZ plane through the canvas normal, all aimed at the
+  // canvas centre: 1 camera = straight above; n > 1 = evenly from -arc_deg to +arc_deg.
+  int cameras = 1;
+  double camera_arc_deg = 30;
+  double camera_distance_mm = 1200;  // from the canvas centre
+  double pixels_per_texel = 1.0;     // image sampling on the canvas at the centre (top view)
+  double view_margin = 0.08;         // share of canvas size added around it (frame in view)
+  // Point lights on a dome around the canvas centre: a Fibonacci spiral over elevations
+  // [min, max] (deg above the canvas plane), each light used with every camera.
+  int lights = 64;
+  double light_min_elevation_deg = 15, light_max_elevation_deg = 85;
+  double light_distance_mm = 900;
+  double white_level = 0.8;  // intensity such that a white Lambertian (albedo 1) at the canvas
+                             // centre, lit at normal incidence, reads this (linear)
+  // Held-out images: lights on the same dome between the fitting ones (spiral offset by half a
+  // step), seen by the first camera and by one extra camera (azimuth 90 deg off the arc, at
+  // held_out_camera_deg from the normal) that is not in the fitting set.
+  int held_out_lights = 8;
+  double held_out_camera_deg = 20;
+  double noise_sigma = 0.002;  // fitting images: Gaussian, linear radiance units, before encoding
+  PhotoEncoding encoding = PhotoEncoding::kSrgb8;
+  bool shadows = true;
+  double frame_albedo = 0.35;
+  uint64_t seed = 1;
+  Status Validate() const;
+};
+
+struct SyntheticPhotoSet {
+  PhotoSet fit;       // pixels loaded as a reader would return them after decoding the encoded
+                      // files (quantised, linearised, saturated pixels flagged); entry names
+                      // "synthetic: images[i]"
+  PhotoSet held_out;  // noise-free linear renders (encoding kLinear, no flags)
+  // Per held-out image: 1 where the pixel shows a canvas texel that no frame shadow darkens (the
+  // pixels a fit of the canvas alone can be judged on), else 0.
+  std::vector<Grid<uint8_t>> held_out_mask;
+  // Ground truth on the PAINTING's texel grid: one-lobe maps (measured-material texels hold the
+  // material's diffuse term only and are marked in `measured_texel`), the material index per
+  // texel, and the materials.
+  ReflectanceMaps truth;
+  Grid<uint8_t> material_index;
+  Grid<uint8_t> measured_texel;
+  std::vector<PaintMaterial> materials;
+  RigidTransform canvas_from_scan;
+  PhotoSimOptions options;
+  size_t saturated_pixels = 0;  // over the fitting images, after encoding
+};
+
+// Invalid options throw (validate first). `materials` empty: DefaultPaintMaterials(false).
+SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& canvas_from_scan,
+                                   const PhotoSimOptions& options,
+                                   std::vector<PaintMaterial> materials = {},
+                                   const ProgressCallback& progress = nullptr);
+
+// Writes, each file atomically, into `dir` (created):
+//   calib.json + images/img_NNN.{png,exr}             the fitting set (docs/formats.md calibration)
+//   held_out/calib.json + held_out/img_NNN.exr       held-out renders (linear EXR)
+//   held_out/mask_NNN.png                            held_out_mask (0/255)
+//   truth/rho_d.exr, rho_s.exr, lobe.exr, material.png, materials.json
+// Image paths in the JSON files are relative to the JSON's folder.
+Status WriteSyntheticPhotoSet(const std::filesystem::path& dir, const SyntheticPhotoSet& set);
+
+}  // namespace digitize::synth

@@ -1,0 +1,95 @@
+// Ray queries against a canvas height field with Embree (issue 3: shadow and visibility rays of
+// the reflectance samples; relighting renders; later the viewer's ground-truth reference).
+//
+// Layer: samples (core + height_field.h). Embree stays in height_field_tracer.cpp.
+//
+// GEOMETRY. The surface is the triangulated texel grid in the CANVAS frame (mm): one vertex per
+// texel centre at (TexelCentreMm(x, y), height_mm(x, y)), two triangles per quad of four texel
+// centres -- the same surface the generator's Scene traces, and the one normals.h differentiates.
+// Every texel takes part (kOutside texels hold height 0, the canvas plane: they block nothing
+// above it). Built as Embree grid primitives (RTC_GEOMETRY_TYPE_GRID, pieces of <= 256 x 256 quads).
+//
+// SKIPPING RAYS THAT CANNOT BE BLOCKED. A ray leaving a point at height h upwards (dz > 0) can only
+// hit relief higher than h, and only within the horizontal reach r = (H - h) / tan(elevation) where
+// H bounds the relief it can meet. Occluded() first bounds H with the global max height, then
+// refines it with a max-pyramid (per-block maxima over power-of-two blocks) over the square of
+// radius r around the origin, a few rounds; a ray whose bound falls to <= h (+ epsilon) is
+// skipped (not blocked), and a traced ray gets tfar cut to its reach. Rays going down or level
+// (dz <= 0) are always traced (with their own tfar). The skip is exact (never skips a ray that
+// Embree would report blocked, up to the epsilon below), so results with and without skipping agree;
+// `TraceOptions::skip_unblockable = false` turns it off for benchmarks and tests.
+//
+// Self-intersection: callers pass origins ON the surface; each ray starts at tnear =
+// origin_offset_mm (default 1e-3 x pitch) along its direction, after the origin is lifted by the
+// same amount along +Z.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "digitize/core.h"
+#include "digitize/height_field.h"
+
+namespace digitize {
+
+struct TraceOptions {
+  bool skip_unblockable = true;  // skip rays that the max-pyramid proves free
+  double origin_offset_mm = -1;  // < 0: 1e-3 x pitch_mm
+  int num_threads = 0;           // 0 = all cores (batches run in parallel with TBB)
+};
+
+// Counts of one or many Occluded calls (add them up with +=).
+struct TraceStats {
+  size_t rays = 0;     // requested
+  size_t skipped = 0;  // proven unblockable without tracing
+  size_t traced = 0;   // given to Embree
+  size_t blocked = 0;  // found blocked (all traced)
+  TraceStats& operator+=(const TraceStats& o) {
+    rays += o.rays, skipped += o.skipped, traced += o.traced, blocked += o.blocked;
+    return *this;
+  }
+};
+
+struct SurfaceHit {
+  bool hit = false;
+  float t = 0;          // distance along the (unit) direction, mm
+  float texel_x = 0;    // continuous texel coordinates of the hit (texel centres at integers)
+  float texel_y = 0;
+};
+
+class HeightFieldTracer {
+ public:
+  // Errors: an empty field, a field smaller than 2 x 2 texels, pitch <= 0, non-finite heights,
+  // or an Embree failure (message from Embree). Copies what it needs: `field` may go away.
+  static Result<HeightFieldTracer> Build(const HeightField& field);
+
+  HeightFieldTracer(HeightFieldTracer&&) noexcept;
+  HeightFieldTracer& operator=(HeightFieldTracer&&) noexcept;
+  ~HeightFieldTracer();
+
+  // Occlusion of many rays, canvas frame. origins: points on the surface (mm); directions: unit;
+  // tfar: max distance (mm) per ray (+inf for a directional light). blocked[i] = 1 when something
+  // lies on ray i within (tnear, tfar), else 0. All spans the same length. Thread-safe; runs in
+  // parallel over batches when the span is long. Stats are ADDED to *stats when given.
+  void Occluded(std::span<const Vec3f> origins, std::span<const Vec3f> directions,
+                std::span<const float> tfar, std::span<uint8_t> blocked,
+                const TraceOptions& options = {}, TraceStats* stats = nullptr) const;
+
+  // Closest hits of many rays (camera rays of a relighting render), canvas frame, no skipping.
+  void Intersect(std::span<const Vec3f> origins, std::span<const Vec3f> directions,
+                 std::span<SurfaceHit> hits, const TraceOptions& options = {}) const;
+
+  float max_height_mm() const;
+  double pitch_mm() const;
+  int width() const;
+  int height() const;
+
+ private:
+  struct Impl;
+  explicit HeightFieldTracer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace digitize
