@@ -146,6 +146,14 @@ Status WriteFloatExr(const fs::path& path, const Grid<Vec3f>& image,
   return WritePixels(path, "openexr", spec, image.data.data());
 }
 
+Status WriteFloatExr(const fs::path& path, const Grid<std::array<float, 4>>& image,
+                     const std::array<std::string, 4>& channels, const ImageMetadata& metadata) {
+  CheckStorage(image);
+  const auto spec = ExrSpec(image.width, image.height,
+                            {channels[0], channels[1], channels[2], channels[3]}, metadata);
+  return WritePixels(path, "openexr", spec, image.data.data());
+}
+
 Status WritePng8(const fs::path& path, const Grid<uint8_t>& image) {
   CheckStorage(image);
   const OIIO::ImageSpec spec(image.width, image.height, 1, OIIO::TypeDesc::UINT8);
@@ -213,10 +221,11 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
                  std::to_string(spec.height) + " = " + std::to_string(pixels) +
                  " pixels exceeds the limit of " + std::to_string(max_pixels)};
   }
-  if (spec.nchannels != 1 && spec.nchannels != 3) {
+  if (spec.nchannels < 1 || spec.nchannels > 4 || spec.nchannels == 2) {
     return Error{name + ": " + std::to_string(spec.nchannels) + " channels (" +
                  JoinNames(spec.channelnames) +
-                 "); only 1-channel (height, mask) or 3-channel (X,Y,Z or RGB) images are read"};
+                 "); only 1-channel (height, mask), 3-channel (X,Y,Z or RGB) or 4-channel (RGBA, "
+                 "lobe) images are read"};
   }
 
   FloatImage image;

@@ -110,9 +110,9 @@ Result<ImageHeader> ReadHeader(const fs::path& path) {
   auto read = ReadImageHeader(path);
   if (!read.ok()) return read.error();
   const ImageHeader header = *read;
-  if (header.channels != 1 && header.channels != 3) {
+  if (header.channels != 1 && header.channels != 3 && header.channels != 4) {
     return Error{name + ": " + std::to_string(header.channels) +
-                 " channels; photos must be 1-channel (grey) or 3-channel (RGB)"};
+                 " channels; photos must be 1-channel (grey), 3-channel (RGB) or RGBA"};
   }
   return header;
 }
@@ -743,9 +743,18 @@ Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
                  Size(image->width, image->height) + ", its camera says " +
                  Size(photo.camera.width, photo.camera.height)};
   }
-  if (image->channels != 1 && image->channels != 3) {  // ReadImage guarantees it; cheap to keep
+  if (image->channels == 4) {
+    // RGBA (a PNG saved with alpha): the colour is what was photographed; alpha is dropped.
+    float* p = image->pixels.data();
+    const size_t n = static_cast<size_t>(image->width) * static_cast<size_t>(image->height);
+    for (size_t i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) p[i * 3 + c] = p[i * 4 + c];
+    image->pixels.resize(n * 3);
+    image->channels = 3;
+  }
+  if (image->channels != 1 && image->channels != 3) {
     return Error{photo.entry + ": " + photo.path.string() + ": " + std::to_string(image->channels) +
-                 " channels; photos must be 1-channel (grey) or 3-channel (RGB)"};
+                 " channels; photos must be 1-channel (grey), 3-channel (RGB) or RGBA"};
   }
   const ColourEncoding encoding = Resolve(photo.encoding, image->integer_samples);
   Converted c;

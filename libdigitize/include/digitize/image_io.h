@@ -30,12 +30,15 @@ Status WriteFloatExr(const std::filesystem::path& path, const Grid<float>& image
                      const std::string& channel, const ImageMetadata& metadata = {});
 Status WriteFloatExr(const std::filesystem::path& path, const Grid<Vec3f>& image,
                      const std::array<std::string, 3>& channels, const ImageMetadata& metadata = {});
+Status WriteFloatExr(const std::filesystem::path& path, const Grid<std::array<float, 4>>& image,
+                     const std::array<std::string, 4>& channels, const ImageMetadata& metadata = {});
 // 8-bit single-channel PNG (masks), values written as they are.
 Status WritePng8(const std::filesystem::path& path, const Grid<uint8_t>& image);
 // 8-bit RGB PNG (previews).
 Status WritePngRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image);
 
-// Reads any single-channel or 3-channel image OpenImageIO opens, converted to float.
+// Reads any 1-, 3- or 4-channel image OpenImageIO opens, converted to float (callers check the
+// channel count they need).
 struct FloatImage {
   int width = 0, height = 0, channels = 0;
   std::vector<float> pixels;  // interleaved

@@ -1,0 +1,91 @@
+// "Fit BRDF textures from photo sets" (SPEC steps 5-6; issue 3): canvas + registered photos ->
+// per-texel reflectance maps with a status per texel and a report.
+//
+// Layer: samples (reflectance_samples.h, brdf_fit.h, reflectance_maps.h).
+//
+// The canvas is processed in tiles of tile_texels texels (row-major runs of the canvas's texels,
+// kOutside ones left out): gather the tile's samples (reflectance_samples.h, parallel over photos),
+// fit them (brdf_fit.h, parallel over texels), write the maps; so memory stays ~tile_texels x
+// photos x 48 bytes whatever the canvas size.
+//
+// Unmodelled shadows. Shadows cast by anything but the relief (the frame under a grazing light, a
+// hand, a stand) are invisible to the ray tests, and a dark sample pulls the whole fit down. The
+// model bounds radiance from below by the diffuse term (the lobe is >= 0): after a first fit, a
+// sample with, summed over channels, radiance < dark_outlier_ratio x E rho_d AND (E rho_d -
+// radiance) > dark_outlier_sigmas x noise_sigma x sqrt(3) is removed as shadowed, and the texel is
+// fitted again (at most dark_outlier_rounds times). Counted in the report.
+//
+// Texels: kOutside texels are not fitted (zeros, status kTooFewSamples, like texels with no
+// usable sample); everything else is (kUnfilled texels too: their heights are inpainted, their
+// normals smooth, and their colour is still measured).
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "digitize/brdf_fit.h"
+#include "digitize/core.h"
+#include "digitize/height_field.h"
+#include "digitize/photo_set.h"
+#include "digitize/reflectance_maps.h"
+#include "digitize/reflectance_samples.h"
+
+namespace digitize {
+
+struct ReflectanceFitOptions {
+  SampleOptions samples;
+  BrdfFitOptions fit;
+  int tile_texels = 32768;          // texels gathered and fitted at a time (memory bound)
+  double dark_outlier_ratio = 0.5;  // <= 0 disables the unmodelled-shadow removal (see above)
+  double dark_outlier_sigmas = 6.0;
+  int dark_outlier_rounds = 2;
+  Status Validate() const;
+};
+
+struct ReflectanceFitReport {
+  SampleStats samples;
+  BrdfFitSummary fit;           // over the fitted texels; fit.seconds = wall time fitting
+  size_t dark_outliers = 0;     // samples removed as unmodelled shadows
+  size_t texels_refitted = 0;   // texels fitted again after removing them
+  size_t texels_outside = 0;    // kOutside texels, not fitted
+  double seconds_tracer = 0;    // building the ray-tracing structure
+  double seconds_samples = 0;   // gathering samples, rays included (wall)
+  double seconds_fit = 0;       // fitting (wall)
+  double seconds_total = 0;
+  // One line: "1.05 M texels x 64 photos: 97.8 % converged, 1.9 % diffuse-only, ...; samples
+  // 2.1 s, fit 4.9 s, total 7.4 s".
+  std::string Brief() const;
+};
+
+struct ReflectanceFitResult {
+  ReflectanceMaps maps;
+  ReflectanceFitReport report;
+};
+
+// Errors (nothing fitted): invalid options; sizes that differ; photos not loaded; a camera that
+// does not see the canvas (names the calibration entry); a tracer build failure. Never NaN/Inf in
+// the maps (checked).
+Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
+                                            const RigidTransform& canvas_from_scan,
+                                            const PhotoSet& photos,
+                                            const ReflectanceFitOptions& options,
+                                            const ProgressCallback& progress = nullptr);
+
+// The report as JSON text (docs/formats.md, "fit report").
+std::string ReflectanceReportJson(const ReflectanceFitResult& result,
+                                  const ReflectanceFitOptions& options,
+                                  const std::vector<std::string>& inputs);
+
+// Writes rho_d.exr, rho_s.exr (RGB, 1/sr), lobe.exr (channels cx, cy, cz, k), fit_error.exr,
+// fit_status.png (TexelFitStatus values x 40, readable by eye) and report.json into dir, each
+// atomically (the CLI wraps the folder in WriteDirectoryAtomically).
+Status WriteReflectanceOutputs(const std::filesystem::path& dir, const ReflectanceFitResult& result,
+                               const ReflectanceFitOptions& options,
+                               const std::vector<std::string>& inputs);
+
+// Reads what WriteReflectanceOutputs wrote (the maps only). Errors name the file: missing,
+// wrong size or channels, a value the maps may not hold.
+Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir);
+
+}  // namespace digitize

@@ -1,0 +1,83 @@
+// Reflectance samples (SPEC step 5; issue 3 section 2 "Samples" and "Rejection"): every canvas
+// texel projected into every photo, with its local view and light directions, its colour and the
+// light's irradiance -- the input of the per-texel BRDF fit (brdf_fit.h).
+//
+// Layer: samples (core, photo_set.h, brdf_fit.h, height_field_tracer.h, tangent_frame.h).
+//
+// For texel (x, y) (any state but kOutside) and photo i:
+//   p   = (TexelCentreMm(x, y), height_mm(x, y)) in the canvas frame -- the TRUE height, so the
+//         directions are corrected for the relief (paper 001, section 4.4); p_scan the same point
+//         in the scan frame (canvas_from_scan inverse), where cameras and lights live;
+//   n   = normals(x, y); directions go to its tangent frame (tangent_frame.h);
+//   v   = towards the camera (pinhole: the centre; orthographic: the axis), l = towards the light;
+//   rgb = bilinear interpolation of the photo at Camera::Project(p_scan);
+//   E   = Light::IrradianceAt(p_scan) * (n.l)   (what multiplies f_r; brdf_fit.h).
+// A candidate (texel, photo) is REJECTED, in this order (each counted in SampleStats):
+//   behind the camera; outside the image; n.v <= min_cos (texel faces away); n.l <= min_cos
+//   (light below the texel's horizon); a NaN/Inf pixel among the 4 interpolated; a saturated
+//   pixel among them (only a lower bound of the radiance); black (every channel <= black_level:
+//   clipped at the sensor's floor, so the value is only an upper bound); hidden from the camera
+//   (a ray from p towards the camera meets the relief); shadowed (a ray from p towards the light
+//   meets the relief). Rays are traced only for candidates that survive the cheaper tests, with
+//   the tracer's exact skipping of rays that cannot be blocked (counts in view_rays/light_rays).
+// Frame shadows are not visible to these tests (the canvas height field holds no frame): the fit
+// stage removes them as samples darker than the diffuse floor (reflectance_fit.h).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "digitize/brdf_fit.h"
+#include "digitize/core.h"
+#include "digitize/height_field.h"
+#include "digitize/height_field_tracer.h"
+#include "digitize/photo_set.h"
+
+namespace digitize {
+
+struct SampleOptions {
+  double min_cos = 0.0;     // n.v and n.l must exceed this (0: anything above the horizon)
+  float black_level = 0.0f; // linear value at or below which a channel counts as black
+  bool reject_black = true; // drop samples black in every channel (clipped at the floor)
+  bool visibility_rays = true;  // trace rays towards the camera (hidden texels)
+  bool shadow_rays = true;      // trace rays towards the light (self-shadowing)
+  TraceOptions trace;           // skip_unblockable etc.
+  Status Validate() const;
+};
+
+struct SampleStats {
+  size_t texels = 0;      // texels sampled
+  size_t candidates = 0;  // texels x photos
+  size_t behind_camera = 0, outside_image = 0, facing_away = 0, light_below_horizon = 0;
+  size_t non_finite = 0, saturated = 0, black = 0, hidden = 0, shadowed = 0;
+  size_t kept = 0;
+  TraceStats view_rays, light_rays;
+  SampleStats& operator+=(const SampleStats& o);
+  // "61.2 M candidates, 58.0 M kept (94.8 %); rejected: 1.2 M shadowed, ...; rays: 120 M, 91 % skipped"
+  std::string Brief() const;
+};
+
+// What the samples are taken from. Everything must outlive the call; sizes are checked by
+// ValidateSampleScene, which FitReflectance calls (GatherSamples only asserts them).
+struct SampleScene {
+  const HeightField* canvas = nullptr;
+  const Grid<Vec3f>* normals = nullptr;  // unit, canvas frame, canvas size
+  RigidTransform canvas_from_scan;
+  const PhotoSet* photos = nullptr;      // pixels loaded
+  const HeightFieldTracer* tracer = nullptr;  // built from *canvas
+};
+
+// Input errors: sizes differ, photos not loaded, a camera that does not see the canvas or sits
+// behind it (the error names the calibration entry and file), a non-finite normal.
+Status ValidateSampleScene(const SampleScene& scene);
+
+// Samples of `texels` (indices y * width + x, any order, none kOutside), texel by texel in that
+// order, APPENDED to `out` (one AddTexel per texel, possibly empty). Parallel over photos (TBB)
+// when `parallel`. Stats are added to *stats.
+void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
+                   const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
+                   bool parallel = true);
+
+}  // namespace digitize

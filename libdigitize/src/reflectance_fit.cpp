@@ -1,0 +1,350 @@
+#include "digitize/reflectance_fit.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "digitize/image_io.h"
+
+namespace digitize {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::string Format(const char* fmt, auto... args) {
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer), fmt, args...);
+  return buffer;
+}
+
+// Keeps the samples of a texel that do not lie far below the diffuse floor of `params` (see the
+// header). Returns how many were removed.
+size_t RemoveDarkOutliers(std::span<const BrdfSample> in, const LafortuneParams& params,
+                          const ReflectanceFitOptions& o, std::vector<BrdfSample>& out) {
+  out.clear();
+  const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
+  for (const BrdfSample& s : in) {
+    const double floor = s.irradiance.cwiseProduct(params.rho_d).sum();
+    const double seen = s.radiance.sum();
+    if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) continue;
+    out.push_back(s);
+  }
+  return in.size() - out.size();
+}
+
+}  // namespace
+
+Status ReflectanceFitOptions::Validate() const {
+  if (Status s = samples.Validate(); !s.ok()) return Error{"samples: " + s.message()};
+  if (Status s = fit.Validate(); !s.ok()) return Error{"fit: " + s.message()};
+  if (tile_texels < 1 || tile_texels > (1 << 24))
+    return Error{"tile_texels must be in [1, 16777216], got " + std::to_string(tile_texels)};
+  if (!std::isfinite(dark_outlier_ratio) || dark_outlier_ratio >= 1)
+    return Error{"dark_outlier_ratio must be < 1 (<= 0 disables), got " +
+                 FormatNumber(dark_outlier_ratio)};
+  if (!(std::isfinite(dark_outlier_sigmas) && dark_outlier_sigmas >= 0))
+    return Error{"dark_outlier_sigmas must be >= 0, got " + FormatNumber(dark_outlier_sigmas)};
+  if (dark_outlier_rounds < 0 || dark_outlier_rounds > 10)
+    return Error{"dark_outlier_rounds must be in [0, 10], got " +
+                 std::to_string(dark_outlier_rounds)};
+  return Status::Ok();
+}
+
+std::string ReflectanceFitReport::Brief() const {
+  const double mtexels = static_cast<double>(fit.texels) / 1e6;
+  std::string photos;
+  if (samples.texels > 0)
+    photos = Format(" x %zu photos", samples.candidates / samples.texels);
+  BrdfFitSummary s = fit;
+  s.seconds = seconds_total;
+  return Format("%.3g M texels%s: ", mtexels, photos.c_str()) + s.BriefReport() +
+         Format(" (samples %.2f s, fit %.2f s)", seconds_samples, seconds_fit);
+}
+
+Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
+                                            const RigidTransform& canvas_from_scan,
+                                            const PhotoSet& photos,
+                                            const ReflectanceFitOptions& options,
+                                            const ProgressCallback& progress) {
+  const auto start = Clock::now();
+  if (Status s = options.Validate(); !s.ok()) return Error{"fit options: " + s.message()};
+
+  ReportProgress(progress, "fit", 0.0);
+  auto t0 = Clock::now();
+  auto tracer = HeightFieldTracer::Build(canvas);
+  if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
+  ReflectanceFitResult result;
+  ReflectanceFitReport& report = result.report;
+  report.seconds_tracer = Since(t0);
+
+  const SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
+  if (Status s = ValidateSampleScene(scene); !s.ok()) return s.error();
+
+  std::vector<uint32_t> texels;
+  texels.reserve(canvas.height_mm.size());
+  for (size_t i = 0; i < canvas.state.size(); ++i) {
+    if (canvas.state.data[i] == TexelState::kOutside)
+      ++report.texels_outside;
+    else
+      texels.push_back(static_cast<uint32_t>(i));
+  }
+
+  ReflectanceMaps& maps = result.maps;
+  maps = ReflectanceMaps::Zeros(canvas.width(), canvas.height());
+  BrdfFitSummary& summary = report.fit;
+  summary.method = options.fit.method;
+  double rms_sum = 0, iteration_sum = 0;
+  size_t lobe_texels = 0;
+  const size_t tile = static_cast<size_t>(options.tile_texels);
+  BrdfSamples samples;
+  for (size_t begin = 0; begin < texels.size(); begin += tile) {
+    const std::span<const uint32_t> part(texels.data() + begin,
+                                         std::min(tile, texels.size() - begin));
+    samples.samples.clear();
+    samples.texel_begin.assign(1, 0);
+    t0 = Clock::now();
+    GatherSamples(scene, part, options.samples, samples, report.samples);
+    report.seconds_samples += Since(t0);
+
+    t0 = Clock::now();
+    BrdfFitOptions fit_options = options.fit;
+    auto fitted = FitBrdf(samples, fit_options);
+    if (!fitted.ok()) return fitted.error();  // options were validated: not expected
+    BrdfFitResult& fit = *fitted;
+    std::vector<size_t> removed(part.size(), 0);
+    if (options.dark_outlier_ratio > 0 && options.dark_outlier_rounds > 0) {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, part.size(), 256),
+                        [&](const tbb::blocked_range<size_t>& r) {
+                          std::vector<BrdfSample> kept, current;
+                          for (size_t t = r.begin(); t != r.end(); ++t) {
+                            std::span<const BrdfSample> in = samples.Texel(t);
+                            for (int round = 0; round < options.dark_outlier_rounds; ++round) {
+                              const size_t n = RemoveDarkOutliers(in, fit.params[t], options, kept);
+                              if (n == 0) break;
+                              removed[t] += n;
+                              current.swap(kept);
+                              in = current;
+                              const TexelFit refit = FitBrdfTexel(in, fit_options);
+                              fit.params[t] = refit.params;
+                              fit.status[t] = refit.status;
+                              fit.rms_error[t] = refit.rms_error;
+                            }
+                          }
+                        });
+    }
+    report.seconds_fit += Since(t0);
+
+    for (size_t t = 0; t < part.size(); ++t) {
+      const int x = static_cast<int>(part[t] % static_cast<uint32_t>(canvas.width()));
+      const int y = static_cast<int>(part[t] / static_cast<uint32_t>(canvas.width()));
+      maps.Set(x, y, fit.params[t]);
+      maps.status(x, y) = fit.status[t];
+      maps.fit_error(x, y) = fit.rms_error[t];
+      ++summary.count_by_status[static_cast<size_t>(fit.status[t])];
+      rms_sum += fit.rms_error[t];
+      if (removed[t] > 0) {
+        report.dark_outliers += removed[t];
+        ++report.texels_refitted;
+      }
+    }
+    summary.texels += part.size();
+    summary.samples_total += fit.summary.samples_total;
+    summary.samples_used += fit.summary.samples_used;
+    summary.samples_saturated += fit.summary.samples_saturated;
+    const size_t tile_lobes = part.size() - fit.summary.count(TexelFitStatus::kDiffuseOnly) -
+                              fit.summary.count(TexelFitStatus::kTooFewSamples);
+    iteration_sum += fit.summary.mean_iterations * static_cast<double>(tile_lobes);
+    lobe_texels += tile_lobes;
+    ReportProgress(progress, "fit",
+                   static_cast<double>(begin + part.size()) / static_cast<double>(texels.size()));
+  }
+  summary.samples_used -= std::min(summary.samples_used, report.dark_outliers);
+  summary.mean_rms_error = summary.texels ? rms_sum / static_cast<double>(summary.texels) : 0.0;
+  summary.mean_iterations = lobe_texels ? iteration_sum / static_cast<double>(lobe_texels) : 0.0;
+  summary.seconds = report.seconds_fit;
+  report.seconds_total = Since(start);
+  // Texels with no photo at all never reached FitBrdf's own check: check the whole maps once.
+  const Status valid = maps.Validate();
+  DIGITIZE_CHECK(valid.ok(), "FitReflectance produced invalid maps: " + valid.message());
+  ReportProgress(progress, "fit", 1.0);
+  return result;
+}
+
+std::string ReflectanceReportJson(const ReflectanceFitResult& result,
+                                  const ReflectanceFitOptions& options,
+                                  const std::vector<std::string>& inputs) {
+  using nlohmann::json;
+  const ReflectanceFitReport& r = result.report;
+  const SampleStats& s = r.samples;
+  json status = json::object();
+  for (int i = 0; i < kTexelFitStatusCount; ++i)
+    status[ToString(static_cast<TexelFitStatus>(i))] = r.fit.count_by_status[i];
+  auto rays = [](const TraceStats& t) {
+    return json{{"rays", t.rays}, {"skipped", t.skipped}, {"traced", t.traced}, {"blocked", t.blocked}};
+  };
+  const BrdfFitOptions& f = options.fit;
+  json doc = {
+      {"format", "digitize.fit_report"},
+      {"version", 1},
+      {"tool_version", DIGITIZE_VERSION},
+      {"inputs", inputs},
+      {"model",
+       {{"name", "lafortune-1-lobe"},
+        {"formula", "f_r = rho_d + rho_s * max(0, cx vx lx + cy vy ly + cz vz lz)^k, per RGB channel"},
+        {"gauge", "cz = 1, |cx| <= 1, |cy| <= 1"},
+        {"frame", "texel tangent frame: z = normal, x = canvas X made perpendicular to it"},
+        {"units", "rho_d, rho_s in 1/sr; radiance = f_r * (n.l) * E"}}},
+      {"brief", r.Brief()},
+      {"size_texels", {result.maps.width(), result.maps.height()}},
+      {"texels_fitted", r.fit.texels},
+      {"texels_outside", r.texels_outside},
+      {"status", status},
+      {"samples",
+       {{"candidates", s.candidates},
+        {"kept", s.kept},
+        {"rejected",
+         {{"behind_camera", s.behind_camera},
+          {"outside_image", s.outside_image},
+          {"facing_away", s.facing_away},
+          {"light_below_horizon", s.light_below_horizon},
+          {"non_finite", s.non_finite},
+          {"saturated", s.saturated},
+          {"black", s.black},
+          {"hidden", s.hidden},
+          {"shadowed", s.shadowed},
+          {"dark_outliers", r.dark_outliers}}},
+        {"view_rays", rays(s.view_rays)},
+        {"light_rays", rays(s.light_rays)}}},
+      {"texels_refitted", r.texels_refitted},
+      {"mean_rms_error", r.fit.mean_rms_error},
+      {"mean_iterations", r.fit.mean_iterations},
+      {"seconds",
+       {{"tracer", r.seconds_tracer},
+        {"samples", r.seconds_samples},
+        {"fit", r.seconds_fit},
+        {"total", r.seconds_total}}},
+      {"options",
+       {{"method", f.method == BrdfFitMethod::kFast ? "fast" : "ceres"},
+        {"noise_sigma", f.noise_sigma},
+        {"min_samples", f.min_samples},
+        {"k_min", f.k_min},
+        {"k_max", f.k_max},
+        {"max_specular_albedo", f.max_specular_albedo},
+        {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
+        {"min_cos", options.samples.min_cos},
+        {"shadow_rays", options.samples.shadow_rays},
+        {"visibility_rays", options.samples.visibility_rays},
+        {"skip_unblockable", options.samples.trace.skip_unblockable},
+        {"dark_outlier_ratio", options.dark_outlier_ratio},
+        {"dark_outlier_sigmas", options.dark_outlier_sigmas}}}};
+  return doc.dump(2) + "\n";
+}
+
+Status WriteReflectanceOutputs(const std::filesystem::path& dir, const ReflectanceFitResult& result,
+                               const ReflectanceFitOptions& options,
+                               const std::vector<std::string>& inputs) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) return Error{dir.string() + ": cannot create the output folder: " + ec.message()};
+  const ReflectanceMaps& m = result.maps;
+  const ImageMetadata meta = {{"digitize:model", "lafortune-1-lobe, gauge cz = 1"},
+                              {"digitize:frame", "texel tangent frame (docs/formats.md)"},
+                              {"digitize:version", DIGITIZE_VERSION}};
+  auto with = [&](const char* quantity) {
+    ImageMetadata q = meta;
+    q["digitize:quantity"] = quantity;
+    return q;
+  };
+  if (Status s = WriteFloatExr(dir / "rho_d.exr", m.rho_d, {"R", "G", "B"}, with("rho_d (1/sr)"));
+      !s.ok())
+    return s;
+  if (Status s = WriteFloatExr(dir / "rho_s.exr", m.rho_s, {"R", "G", "B"}, with("rho_s (1/sr)"));
+      !s.ok())
+    return s;
+  if (Status s = WriteFloatExr(dir / "lobe.exr", m.lobe, {"cx", "cy", "cz", "k"},
+                               with("lobe (cx, cy, cz = 1, k)"));
+      !s.ok())
+    return s;
+  if (Status s = WriteFloatExr(dir / "fit_error.exr", m.fit_error, "Y",
+                               with("fit RMS error (radiance units)"));
+      !s.ok())
+    return s;
+  Grid<uint8_t> status(m.width(), m.height());
+  for (size_t i = 0; i < status.size(); ++i)
+    status.data[i] = static_cast<uint8_t>(static_cast<int>(m.status.data[i]) * 40);
+  if (Status s = WritePng8(dir / "fit_status.png", status); !s.ok()) return s;
+  return WriteTextFile(dir / "report.json", ReflectanceReportJson(result, options, inputs));
+}
+
+namespace {
+
+// Reads one map; checks size and channel names (OpenEXR may reorder channels: map by name).
+Result<std::vector<float>> ReadChannels(const std::filesystem::path& path,
+                                        const std::vector<std::string>& names, int& width,
+                                        int& height) {
+  auto image = ReadImage(path);
+  if (!image.ok()) return image.error();
+  if (image->channels != static_cast<int>(names.size()))
+    return Error{path.string() + ": " + std::to_string(image->channels) + " channels, expected " +
+                 std::to_string(names.size())};
+  if (width > 0 && (image->width != width || image->height != height))
+    return Error{path.string() + ": " + std::to_string(image->width) + "x" +
+                 std::to_string(image->height) + ", the other maps are " + std::to_string(width) +
+                 "x" + std::to_string(height)};
+  width = image->width;
+  height = image->height;
+  std::vector<int> order(names.size());
+  for (size_t c = 0; c < names.size(); ++c) {
+    const auto it = std::find(image->channel_names.begin(), image->channel_names.end(), names[c]);
+    order[c] = it == image->channel_names.end() ? static_cast<int>(c)
+                                                : static_cast<int>(it - image->channel_names.begin());
+  }
+  const size_t n = static_cast<size_t>(width) * static_cast<size_t>(height);
+  std::vector<float> out(n * names.size());
+  for (size_t i = 0; i < n; ++i)
+    for (size_t c = 0; c < names.size(); ++c)
+      out[i * names.size() + c] = image->pixels[i * names.size() + static_cast<size_t>(order[c])];
+  return out;
+}
+
+}  // namespace
+
+Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
+  int w = 0, h = 0;
+  auto rho_d = ReadChannels(dir / "rho_d.exr", {"R", "G", "B"}, w, h);
+  if (!rho_d.ok()) return rho_d.error();
+  auto rho_s = ReadChannels(dir / "rho_s.exr", {"R", "G", "B"}, w, h);
+  if (!rho_s.ok()) return rho_s.error();
+  auto lobe = ReadChannels(dir / "lobe.exr", {"cx", "cy", "cz", "k"}, w, h);
+  if (!lobe.ok()) return lobe.error();
+  auto error = ReadChannels(dir / "fit_error.exr", {"Y"}, w, h);
+  if (!error.ok()) return error.error();
+  auto status = ReadImage(dir / "fit_status.png");
+  if (!status.ok()) return status.error();
+  if (status->width != w || status->height != h || status->channels != 1)
+    return Error{(dir / "fit_status.png").string() + ": not a 1-channel " + std::to_string(w) +
+                 "x" + std::to_string(h) + " image"};
+  ReflectanceMaps m = ReflectanceMaps::Zeros(w, h);
+  for (size_t i = 0; i < m.rho_d.size(); ++i) {
+    m.rho_d.data[i] = {(*rho_d)[3 * i], (*rho_d)[3 * i + 1], (*rho_d)[3 * i + 2]};
+    m.rho_s.data[i] = {(*rho_s)[3 * i], (*rho_s)[3 * i + 1], (*rho_s)[3 * i + 2]};
+    m.lobe.data[i] = {(*lobe)[4 * i], (*lobe)[4 * i + 1], (*lobe)[4 * i + 2], (*lobe)[4 * i + 3]};
+    m.fit_error.data[i] = (*error)[i];
+    const int code = static_cast<int>(std::lround(status->pixels[i] * 255.0f));
+    if (code % 40 != 0 || code / 40 >= kTexelFitStatusCount)
+      return Error{(dir / "fit_status.png").string() + ": value " + std::to_string(code) +
+                   " is not a fit status"};
+    m.status.data[i] = static_cast<TexelFitStatus>(code / 40);
+  }
+  if (Status s = m.Validate(); !s.ok()) return Error{dir.string() + ": " + s.message()};
+  return m;
+}
+
+}  // namespace digitize

@@ -1,0 +1,282 @@
+#include "digitize/reflectance_samples.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <mutex>
+#include <vector>
+
+#include "digitize/tangent_frame.h"
+
+namespace digitize {
+namespace {
+
+std::string Count(size_t n) {
+  char b[32];
+  if (n >= 10'000'000)
+    std::snprintf(b, sizeof b, "%.1f M", static_cast<double>(n) / 1e6);
+  else if (n >= 10'000)
+    std::snprintf(b, sizeof b, "%.1f k", static_cast<double>(n) / 1e3);
+  else
+    std::snprintf(b, sizeof b, "%zu", n);
+  return b;
+}
+
+// Bilinear colour at pixel coordinates (centres at integers), with the flags of the pixels that
+// carry weight. Coordinates are within [-0.5, size - 0.5] (Camera::InImage): clamp to the border.
+struct PixelSample {
+  Vec3f rgb = Vec3f::Zero();
+  uint8_t flags = 0;
+};
+
+PixelSample Bilinear(const Photo& photo, double u, double v) {
+  const int w = photo.rgb.width, h = photo.rgb.height;
+  u = std::clamp(u, 0.0, static_cast<double>(w - 1));
+  v = std::clamp(v, 0.0, static_cast<double>(h - 1));
+  const int x0 = std::min(static_cast<int>(u), std::max(w - 2, 0));
+  const int y0 = std::min(static_cast<int>(v), std::max(h - 2, 0));
+  const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+  const float fx = static_cast<float>(u - x0), fy = static_cast<float>(v - y0);
+  const float w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
+  PixelSample s;
+  s.rgb = w00 * photo.rgb(x0, y0) + w10 * photo.rgb(x1, y0) + w01 * photo.rgb(x0, y1) +
+          w11 * photo.rgb(x1, y1);
+  if (!photo.flags.empty()) {
+    if (w00 > 0) s.flags |= photo.flags(x0, y0);
+    if (w10 > 0) s.flags |= photo.flags(x1, y0);
+    if (w01 > 0) s.flags |= photo.flags(x0, y1);
+    if (w11 > 0) s.flags |= photo.flags(x1, y1);
+  }
+  return s;
+}
+
+}  // namespace
+
+Status SampleOptions::Validate() const {
+  if (!(std::isfinite(min_cos) && min_cos >= 0 && min_cos < 1))
+    return Error{"min_cos must be in [0, 1), got " + FormatNumber(min_cos)};
+  if (!(std::isfinite(black_level) && black_level >= 0 && black_level < 1))
+    return Error{"black_level must be in [0, 1) (linear), got " + FormatNumber(black_level)};
+  return Status::Ok();
+}
+
+SampleStats& SampleStats::operator+=(const SampleStats& o) {
+  texels += o.texels;
+  candidates += o.candidates;
+  behind_camera += o.behind_camera;
+  outside_image += o.outside_image;
+  facing_away += o.facing_away;
+  light_below_horizon += o.light_below_horizon;
+  non_finite += o.non_finite;
+  saturated += o.saturated;
+  black += o.black;
+  hidden += o.hidden;
+  shadowed += o.shadowed;
+  kept += o.kept;
+  view_rays += o.view_rays;
+  light_rays += o.light_rays;
+  return *this;
+}
+
+std::string SampleStats::Brief() const {
+  std::string out = Count(candidates) + " candidates, " + Count(kept) + " kept";
+  char b[64];
+  std::snprintf(b, sizeof b, " (%.1f %%)",
+                candidates ? 100.0 * static_cast<double>(kept) / static_cast<double>(candidates) : 0.0);
+  out += b;
+  std::string rejected;
+  for (const auto& [n, what] :
+       {std::pair{behind_camera, "behind camera"}, std::pair{outside_image, "outside image"},
+        std::pair{facing_away, "facing away"}, std::pair{light_below_horizon, "light below horizon"},
+        std::pair{non_finite, "NaN/Inf"}, std::pair{saturated, "saturated"},
+        std::pair{black, "black"}, std::pair{hidden, "hidden"}, std::pair{shadowed, "shadowed"}}) {
+    if (n == 0) continue;
+    rejected += (rejected.empty() ? "" : ", ") + Count(n) + " " + what;
+  }
+  if (!rejected.empty()) out += "; rejected: " + rejected;
+  const size_t rays = view_rays.rays + light_rays.rays;
+  const size_t skipped = view_rays.skipped + light_rays.skipped;
+  std::snprintf(b, sizeof b, "; rays: %s, %.1f %% skipped", Count(rays).c_str(),
+                rays ? 100.0 * static_cast<double>(skipped) / static_cast<double>(rays) : 0.0);
+  return out + b;
+}
+
+Status ValidateSampleScene(const SampleScene& scene) {
+  DIGITIZE_CHECK(scene.canvas && scene.normals && scene.photos && scene.tracer,
+                 "SampleScene with a null member");
+  const HeightField& canvas = *scene.canvas;
+  if (canvas.width() < 2 || canvas.height() < 2)
+    return Error{"the canvas is " + std::to_string(canvas.width()) + "x" +
+                 std::to_string(canvas.height()) + " texels; at least 2x2 are needed"};
+  if (scene.normals->width != canvas.width() || scene.normals->height != canvas.height())
+    return Error{"normals are " + std::to_string(scene.normals->width) + "x" +
+                 std::to_string(scene.normals->height) + ", the canvas " +
+                 std::to_string(canvas.width()) + "x" + std::to_string(canvas.height())};
+  for (int y = 0; y < canvas.height(); ++y)
+    for (int x = 0; x < canvas.width(); ++x)
+      if (!IsValid((*scene.normals)(x, y)) || (*scene.normals)(x, y).norm() < 0.5f)
+        return Error{"normal of texel (" + std::to_string(x) + ", " + std::to_string(y) +
+                     ") is not a unit vector"};
+  if (scene.tracer->width() != canvas.width() || scene.tracer->height() != canvas.height())
+    return Error{"the tracer was built from another canvas"};
+  if (scene.photos->photos.empty()) return Error{scene.photos->source.string() + ": no photos"};
+  for (const Photo& p : scene.photos->photos) {
+    if (!p.loaded()) return Error{p.entry + ": " + p.path.string() + ": pixels not loaded"};
+    if (p.rgb.width != p.camera.width || p.rgb.height != p.camera.height)
+      return Error{p.entry + ": " + p.path.string() + ": image is " + std::to_string(p.rgb.width) +
+                   "x" + std::to_string(p.rgb.height) + ", its camera " +
+                   std::to_string(p.camera.width) + "x" + std::to_string(p.camera.height)};
+  }
+  return CheckCamerasSeeCanvas(*scene.photos, scene.canvas_from_scan, canvas);
+}
+
+void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
+                   const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
+                   bool parallel) {
+  const HeightField& canvas = *scene.canvas;
+  const Grid<Vec3f>& normals = *scene.normals;
+  const std::vector<Photo>& photos = scene.photos->photos;
+  const size_t n_texels = texels.size(), n_photos = photos.size();
+  const RigidTransform scan_from_canvas = scene.canvas_from_scan.Inverse();
+  const Mat3d& canvas_rot = scene.canvas_from_scan.rotation;
+  const int width = canvas.width();
+
+  // Per texel: surface point (canvas and scan frames) and tangent frame, shared by every photo.
+  struct TexelGeometry {
+    Vec3d p_canvas, p_scan;
+    TangentFrame frame;
+  };
+  std::vector<TexelGeometry> geometry(n_texels);
+  for (size_t t = 0; t < n_texels; ++t) {
+    const int x = static_cast<int>(texels[t] % static_cast<uint32_t>(width));
+    const int y = static_cast<int>(texels[t] / static_cast<uint32_t>(width));
+    DIGITIZE_CHECK(canvas.height_mm.Contains(x, y) && canvas.state(x, y) != TexelState::kOutside,
+                   "GatherSamples: texel outside the canvas");
+    const Eigen::Vector2d xy = canvas.TexelCentreMm(x, y);
+    geometry[t].p_canvas = {xy.x(), xy.y(), canvas.height_mm(x, y)};
+    geometry[t].p_scan = scan_from_canvas.Apply(geometry[t].p_canvas);
+    geometry[t].frame = MakeTangentFrame(normals(x, y).cast<double>());
+  }
+
+  // slot (t, i) holds photo i's sample of texel t when keep[t * n_photos + i].
+  std::vector<BrdfSample> slots(n_texels * n_photos);
+  std::vector<uint8_t> keep(n_texels * n_photos, 0);
+  std::mutex stats_mutex;
+  stats.texels += n_texels;
+
+  const auto per_photo = [&](size_t i) {
+    const Photo& photo = photos[i];
+    const Camera& camera = photo.camera;
+    const Light& light = photo.light;
+    const bool pinhole = camera.model == CameraModel::kPinhole;
+    const Vec3d camera_centre_scan = camera.CentreInScan();
+    SampleStats local;
+    local.candidates = n_texels;
+    std::vector<uint32_t> candidate;  // texel index t of samples waiting for rays
+    std::vector<Vec3f> origins, view_dirs, light_dirs;
+    std::vector<float> view_far, light_far;
+    candidate.reserve(n_texels);
+    for (size_t t = 0; t < n_texels; ++t) {
+      const TexelGeometry& g = geometry[t];
+      if (!camera.InFront(g.p_scan)) {
+        ++local.behind_camera;
+        continue;
+      }
+      const Eigen::Vector2d px = camera.Project(g.p_scan);
+      if (!camera.InImage(px)) {
+        ++local.outside_image;
+        continue;
+      }
+      const Vec3d v_canvas = canvas_rot * camera.DirectionToCamera(g.p_scan);
+      const Vec3d v_local = g.frame.ToLocal(v_canvas);
+      if (!(v_local.z() > options.min_cos)) {
+        ++local.facing_away;
+        continue;
+      }
+      const Vec3d l_canvas = canvas_rot * light.DirectionTo(g.p_scan);
+      const Vec3d l_local = g.frame.ToLocal(l_canvas);
+      if (!(l_local.z() > options.min_cos)) {
+        ++local.light_below_horizon;
+        continue;
+      }
+      const PixelSample pixel = Bilinear(photo, px.x(), px.y());
+      if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
+        ++local.non_finite;
+        continue;
+      }
+      if (pixel.flags & kPixelSaturated) {
+        ++local.saturated;
+        continue;
+      }
+      if (options.reject_black && pixel.rgb.maxCoeff() <= options.black_level) {
+        ++local.black;
+        continue;
+      }
+      BrdfSample& s = slots[t * n_photos + i];
+      s.view_dir = v_local.cast<float>();
+      s.light_dir = l_local.cast<float>();
+      s.radiance = pixel.rgb;
+      s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
+      candidate.push_back(static_cast<uint32_t>(t));
+      origins.push_back(g.p_canvas.cast<float>());
+      view_dirs.push_back(v_canvas.cast<float>());
+      light_dirs.push_back(l_canvas.cast<float>());
+      view_far.push_back(pinhole ? static_cast<float>((camera_centre_scan - g.p_scan).norm())
+                                 : std::numeric_limits<float>::infinity());
+      light_far.push_back(light.type == LightType::kPoint
+                              ? static_cast<float>((light.position_mm - g.p_scan).norm())
+                              : std::numeric_limits<float>::infinity());
+    }
+    std::vector<uint8_t> hidden(candidate.size(), 0), shadowed(candidate.size(), 0);
+    if (options.visibility_rays)
+      scene.tracer->Occluded(origins, view_dirs, view_far, hidden, options.trace, &local.view_rays);
+    if (options.shadow_rays) {
+      // Only the visible candidates need a shadow ray: compact them first.
+      size_t m = 0;
+      for (size_t c = 0; c < candidate.size(); ++c) {
+        if (hidden[c]) continue;
+        origins[m] = origins[c];
+        light_dirs[m] = light_dirs[c];
+        light_far[m] = light_far[c];
+        ++m;
+      }
+      std::vector<uint8_t> blocked(m, 0);
+      scene.tracer->Occluded(std::span(origins.data(), m), std::span(light_dirs.data(), m),
+                             std::span(light_far.data(), m), blocked, options.trace,
+                             &local.light_rays);
+      for (size_t c = 0, j = 0; c < candidate.size(); ++c)
+        if (!hidden[c]) shadowed[c] = blocked[j++];
+    }
+    for (size_t c = 0; c < candidate.size(); ++c) {
+      if (hidden[c]) {
+        ++local.hidden;
+      } else if (shadowed[c]) {
+        ++local.shadowed;
+      } else {
+        keep[candidate[c] * n_photos + i] = 1;
+        ++local.kept;
+      }
+    }
+    std::lock_guard lock(stats_mutex);
+    stats += local;
+  };
+  if (parallel)
+    tbb::parallel_for(size_t{0}, n_photos, per_photo);
+  else
+    for (size_t i = 0; i < n_photos; ++i) per_photo(i);
+  // parallel_for added each photo's `local` (whose texels field is 0) under the mutex.
+
+  std::vector<BrdfSample> texel_samples;
+  texel_samples.reserve(n_photos);
+  for (size_t t = 0; t < n_texels; ++t) {
+    texel_samples.clear();
+    for (size_t i = 0; i < n_photos; ++i)
+      if (keep[t * n_photos + i]) texel_samples.push_back(slots[t * n_photos + i]);
+    out.AddTexel(texel_samples);
+  }
+}
+
+}  // namespace digitize
