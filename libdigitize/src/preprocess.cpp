@@ -4,7 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "digitize/image_io.h"
 
@@ -298,6 +300,89 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
 
   return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
+}
+
+}  // namespace digitize
+
+namespace digitize {
+
+Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir) {
+  PreprocessedCanvas out;
+  const auto height_path = dir / "height.exr";
+  auto height = ReadImage(height_path);
+  if (!height.ok()) return height.error();
+  if (height->channels != 1)
+    return Error{height_path.string() + ": " + std::to_string(height->channels) +
+                 " channels, expected 1 (height in mm)"};
+  const int w = height->width, h = height->height;
+  auto size_error = [&](const std::filesystem::path& p, int pw, int ph) {
+    return Error{p.string() + ": " + std::to_string(pw) + "x" + std::to_string(ph) +
+                 ", height.exr is " + std::to_string(w) + "x" + std::to_string(h)};
+  };
+  const auto mask_path = dir / "mask.png";
+  auto mask = ReadImage(mask_path);
+  if (!mask.ok()) return mask.error();
+  if (mask->width != w || mask->height != h) return size_error(mask_path, mask->width, mask->height);
+  if (mask->channels != 1) return Error{mask_path.string() + ": expected a 1-channel mask"};
+  const auto normals_path = dir / "normals.exr";
+  auto normals = ReadImage(normals_path);
+  if (!normals.ok()) return normals.error();
+  if (normals->width != w || normals->height != h)
+    return size_error(normals_path, normals->width, normals->height);
+  if (normals->channels != 3) return Error{normals_path.string() + ": expected 3 channels (nx, ny, nz)"};
+
+  out.field.height_mm = Grid<float>(w, h);
+  out.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
+  out.normals = Grid<Vec3f>(w, h);
+  for (size_t i = 0; i < out.field.height_mm.size(); ++i) {
+    const float z = height->pixels[i];
+    if (!std::isfinite(z))
+      return Error{height_path.string() + ": non-finite height at texel " + std::to_string(i % w) +
+                   ", " + std::to_string(i / w)};
+    out.field.height_mm.data[i] = z;
+    const int code = static_cast<int>(std::lround(mask->pixels[i] * 255.0f));
+    switch (code) {
+      case 0: out.field.state.data[i] = TexelState::kOutside; break;
+      case 85: out.field.state.data[i] = TexelState::kUnfilled; break;
+      case 170: out.field.state.data[i] = TexelState::kFilled; break;
+      case 255: out.field.state.data[i] = TexelState::kMeasured; break;
+      default:
+        return Error{mask_path.string() + ": value " + std::to_string(code) + " at texel " +
+                     std::to_string(i % w) + ", " + std::to_string(i / w) +
+                     " is not a texel state (0, 85, 170, 255)"};
+    }
+    const Vec3f n(normals->pixels[3 * i], normals->pixels[3 * i + 1], normals->pixels[3 * i + 2]);
+    if (!IsValid(n) || std::abs(n.norm() - 1.0f) > 1e-3f)
+      return Error{normals_path.string() + ": normal at texel " + std::to_string(i % w) + ", " +
+                   std::to_string(i / w) + " is not a unit vector"};
+    out.normals.data[i] = n;
+  }
+
+  const auto transform_path = dir / "transform.json";
+  std::ifstream file(transform_path);
+  if (!file) return Error{transform_path.string() + ": cannot open"};
+  std::stringstream text;
+  text << file.rdbuf();
+  try {
+    const nlohmann::json doc = nlohmann::json::parse(text.str());
+    if (doc.value("format", "") != "digitize.transform")
+      return Error{transform_path.string() + ": not a digitize.transform file"};
+    const double pitch = doc.at("pitch_mm").get<double>();
+    if (!(std::isfinite(pitch) && pitch > 0))
+      return Error{transform_path.string() + ": pitch_mm must be > 0, got " + FormatNumber(pitch)};
+    out.field.pitch_mm = pitch;
+    const auto& t = doc.at("canvas_from_scan");
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) out.canvas_from_scan.rotation(r, c) = t.at("rotation").at(r).at(c);
+    for (int r = 0; r < 3; ++r) out.canvas_from_scan.translation(r) = t.at("translation_mm").at(r);
+  } catch (const nlohmann::json::exception& e) {
+    return Error{transform_path.string() + ": " + e.what()};
+  }
+  const Mat3d& R = out.canvas_from_scan.rotation;
+  if (!R.allFinite() || !out.canvas_from_scan.translation.allFinite() ||
+      (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
+    return Error{transform_path.string() + ": canvas_from_scan.rotation is not a rotation"};
+  return out;
 }
 
 }  // namespace digitize

@@ -6,9 +6,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
+#include "digitize/relight.h"
 
 namespace digitize {
 namespace {
@@ -85,7 +87,7 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
   report.seconds_tracer = Since(t0);
 
   const SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
-  if (Status s = ValidateSampleScene(scene); !s.ok()) return s.error();
+  if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
 
   std::vector<uint32_t> texels;
   texels.reserve(canvas.height_mm.size());
@@ -345,6 +347,68 @@ Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
   }
   if (Status s = m.Validate(); !s.ok()) return Error{dir.string() + ": " + s.message()};
   return m;
+}
+
+}  // namespace digitize
+
+namespace digitize {
+
+std::string HeldOutScore::Brief() const {
+  char b[160];
+  std::snprintf(b, sizeof b, "held-out PSNR %.2f dB (RMSE %.4f) over %zu photo(s), %.3g M px",
+                psnr_db, rmse, images.size(), static_cast<double>(pixels) / 1e6);
+  return b;
+}
+
+Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f>& normals,
+                                     const ReflectanceMaps& maps,
+                                     const RigidTransform& canvas_from_scan,
+                                     const PhotoSet& held_out,
+                                     const std::vector<Grid<uint8_t>>& masks, double peak) {
+  const auto start = Clock::now();
+  if (!(std::isfinite(peak) && peak > 0)) return Error{"peak must be > 0, got " + FormatNumber(peak)};
+  if (!masks.empty() && masks.size() != held_out.photos.size())
+    return Error{"held-out: " + std::to_string(masks.size()) + " masks for " +
+                 std::to_string(held_out.photos.size()) + " photos"};
+  if (maps.width() != canvas.width() || maps.height() != canvas.height())
+    return Error{"reflectance maps are " + std::to_string(maps.width()) + "x" +
+                 std::to_string(maps.height()) + ", the canvas " + std::to_string(canvas.width()) +
+                 "x" + std::to_string(canvas.height())};
+  auto tracer = HeightFieldTracer::Build(canvas);
+  if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
+  HeldOutScore score;
+  double sse = 0;
+  for (size_t i = 0; i < held_out.photos.size(); ++i) {
+    const Photo& photo = held_out.photos[i];
+    if (!photo.loaded()) return Error{photo.entry + ": " + photo.path.string() + ": pixels not loaded"};
+    const RelitImage relit = RenderRelit(*tracer, canvas, normals, maps, canvas_from_scan,
+                                         photo.camera, photo.light);
+    Grid<uint8_t> mask = relit.mask;
+    if (!masks.empty()) {
+      if (masks[i].width != mask.width || masks[i].height != mask.height)
+        return Error{photo.entry + ": mask size differs from the image"};
+      for (size_t p = 0; p < mask.size(); ++p) mask.data[p] &= masks[i].data[p] ? 1 : 0;
+    }
+    if (!photo.flags.empty())
+      for (size_t p = 0; p < mask.size(); ++p)
+        if (photo.flags.data[p]) mask.data[p] = 0;
+    Grid<Vec3f> a = relit.rgb, b = photo.rgb;
+    const float top = static_cast<float>(peak);
+    for (Vec3f& c : a.data) c = c.cwiseMax(0.0f).cwiseMin(top);
+    for (Vec3f& c : b.data) c = c.cwiseMax(0.0f).cwiseMin(top);
+    const ImageComparison cmp = CompareImages(a, b, mask, peak);
+    score.images.push_back({photo.entry, cmp.psnr_db, cmp.rmse, cmp.pixels});
+    sse += cmp.rmse * cmp.rmse * 3.0 * static_cast<double>(cmp.pixels);
+    score.pixels += cmp.pixels;
+  }
+  if (score.pixels > 0) {
+    const double mse = sse / (3.0 * static_cast<double>(score.pixels));
+    score.rmse = std::sqrt(mse);
+    score.psnr_db = mse > 0 ? 10.0 * std::log10(peak * peak / mse)
+                            : std::numeric_limits<double>::infinity();
+  }
+  score.seconds = Since(start);
+  return score;
 }
 
 }  // namespace digitize

@@ -12,6 +12,7 @@ namespace digitize::cli {
 
 void AddSynthCommand(CLI::App& app, int& exit_code);
 void AddPreprocessCommand(CLI::App& app, int& exit_code);
+void AddFitCommand(CLI::App& app, int& exit_code);
 void AddDemoCommand(CLI::App& app, int& exit_code);
 
 // Flags for every preprocessing threshold (shared by preprocess, demo and later run).

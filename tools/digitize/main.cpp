@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   digitize::cli::AddSynthCommand(app, exit_code);
   digitize::cli::AddPreprocessCommand(app, exit_code);
+  digitize::cli::AddFitCommand(app, exit_code);
   digitize::cli::AddDemoCommand(app, exit_code);
   try {
     app.parse(argc, argv);

@@ -60,4 +60,15 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
                               const PreprocessOptions& options,
                               const std::vector<std::string>& inputs);
 
+// What later stages need from a preprocess output folder (WritePreprocessOutputs): the height
+// field (height.exr + mask.png states), the normals and canvas_from_scan (transform.json).
+struct PreprocessedCanvas {
+  HeightField field;
+  Grid<Vec3f> normals;
+  RigidTransform canvas_from_scan;
+};
+// Errors name the file: missing, unreadable, sizes that differ, a mask value that is no texel
+// state, NaN/Inf heights or normals, a transform whose rotation is not a rotation.
+Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir);
+
 }  // namespace digitize

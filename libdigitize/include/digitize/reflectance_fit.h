@@ -84,6 +84,32 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
                                const ReflectanceFitOptions& options,
                                const std::vector<std::string>& inputs);
 
+// Judging a fit on held-out photographs (lights and views not fitted): each photo is re-rendered
+// from the canvas and the maps (RenderRelit, shadows by the relief on) and compared with the photo
+// over the pixels that see a canvas texel, are not flagged (NaN, saturated) in the photo, and are
+// non-zero in the optional per-photo mask (e.g. the generator's frame-shadow masks). Both images
+// are clipped to [0, peak] first -- what a camera or a display shows -- and PSNR uses that peak
+// (1 = the white of an 8-bit photo). The pooled figure is over all compared pixels of all photos.
+struct HeldOutImageScore {
+  std::string entry;  // the photo's calibration entry
+  double psnr_db = 0, rmse = 0;
+  size_t pixels = 0;
+};
+struct HeldOutScore {
+  std::vector<HeldOutImageScore> images;
+  double psnr_db = 0, rmse = 0;  // pooled
+  size_t pixels = 0;
+  double seconds = 0;
+  std::string Brief() const;  // "held-out PSNR 41.3 dB (RMSE 0.0086) over 8 photos, 1.2 M px"
+};
+// Errors: photos not loaded, masks of the wrong count or size, a tracer build failure.
+Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f>& normals,
+                                     const ReflectanceMaps& maps,
+                                     const RigidTransform& canvas_from_scan,
+                                     const PhotoSet& held_out,
+                                     const std::vector<Grid<uint8_t>>& masks = {},
+                                     double peak = 1.0);
+
 // Reads what WriteReflectanceOutputs wrote (the maps only). Errors name the file: missing,
 // wrong size or channels, a value the maps may not hold.
 Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir);

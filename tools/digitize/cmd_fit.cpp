@@ -1,0 +1,150 @@
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+#include "commands.h"
+#include "digitize/output_dir.h"
+#include "digitize/photo_set.h"
+#include "digitize/preprocess.h"
+#include "digitize/reflectance_fit.h"
+#include "progress_bar.h"
+
+namespace digitize::cli {
+namespace {
+
+struct FitArgs {
+  std::string canvas, photos, held_out, out;
+  std::string method = "fast";
+  PhotoSetOptions photo;
+  ReflectanceFitOptions options;
+  int threads = 0;
+};
+
+// The canvas a photo set is fitted on: a preprocess output folder, or for an RTI capture without
+// one, the flat canvas of its image grid.
+Result<PreprocessedCanvas> LoadCanvas(const FitArgs& args, const PhotoSet& set) {
+  if (!args.canvas.empty()) return ReadPreprocessOutputs(args.canvas);
+  if (!set.is_rti)
+    return Error{"--canvas is required for a calibration file (" + args.photos +
+                 "); only an RTI capture (.lp) can be fitted on a flat canvas without one"};
+  auto flat = FlatCanvasForRti(set);
+  if (!flat.ok()) return flat.error();
+  PreprocessedCanvas c;
+  c.field = std::move(flat).value();
+  c.normals = Grid<Vec3f>(c.field.width(), c.field.height(), Vec3f::UnitZ());
+  return c;
+}
+
+Result<PhotoSet> ReadPhotos(const std::string& path, const PhotoSetOptions& o,
+                            const ProgressCallback& progress) {
+  const std::filesystem::path p(path);
+  if (p.extension() == ".lp" || p.extension() == ".LP") return ReadRtiCapture(p, o, progress);
+  return ReadCalibration(p, o, progress);
+}
+
+int RunFit(FitArgs args) {
+  const std::string cmd = "fit";
+  args.options.fit.method = args.method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
+  args.options.fit.num_threads = args.threads;
+  args.options.samples.trace.num_threads = args.threads;
+  if (Status s = args.photo.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+
+  ProgressBar bar("fit");
+  Result<PhotoSet> set = ReadPhotos(args.photos, args.photo, bar.Callback());
+  if (!set.ok()) return Fail(cmd, set.error().message);
+  Result<PreprocessedCanvas> canvas = LoadCanvas(args, *set);
+  if (!canvas.ok()) return Fail(cmd, canvas.error().message);
+  Result<ReflectanceFitResult> result = FitReflectance(
+      canvas->field, canvas->normals, canvas->canvas_from_scan, *set, args.options, bar.Callback());
+  if (!result.ok()) {
+    bar.Finish();
+    return Fail(cmd, result.error().message);
+  }
+  std::optional<HeldOutScore> score;
+  if (!args.held_out.empty()) {
+    Result<PhotoSet> held = ReadPhotos(args.held_out, args.photo, bar.Callback());
+    if (!held.ok()) return Fail(cmd, held.error().message);
+    auto s = EvaluateHeldOut(canvas->field, canvas->normals, result->maps,
+                             canvas->canvas_from_scan, *held);
+    if (!s.ok()) return Fail(cmd, s.error().message);
+    score = *s;
+  }
+  bar.Finish();
+
+  std::vector<std::string> inputs = {args.photos};
+  if (!args.canvas.empty()) inputs.insert(inputs.begin(), args.canvas);
+  Status written = WriteDirectoryAtomically(args.out, [&](const std::filesystem::path& dir) {
+    return WriteReflectanceOutputs(dir, *result, args.options, inputs);
+  });
+  if (!written.ok()) return Fail(cmd, written.message());
+  std::printf("photos: %s\n", set->summary.Brief().c_str());
+  std::printf("samples: %s\n", result->report.samples.Brief().c_str());
+  if (result->report.dark_outliers > 0)
+    std::printf("unmodelled shadows: %zu dark samples removed, %zu texels refitted\n",
+                result->report.dark_outliers, result->report.texels_refitted);
+  if (score) std::printf("%s\n", score->Brief().c_str());
+  std::printf("%s\n", result->report.Brief().c_str());
+  std::printf("outputs in %s/ (rho_d.exr, rho_s.exr, lobe.exr, fit_error.exr, fit_status.png, "
+              "report.json)\n", args.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void AddFitCommand(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<FitArgs>();
+  CLI::App* c = app.add_subcommand(
+      "fit",
+      "Canvas (a `digitize preprocess` folder) + registered photos -> per-texel Lafortune "
+      "reflectance maps (rho_d, rho_s, lobe as float EXR), a fit-error map, a status map and a "
+      "report.\nPhotos: a calibration JSON (docs/formats.md) or an RTI capture (.lp; fitted on a "
+      "flat canvas when --canvas is left out).");
+  c->add_option("--photos", args->photos, "Calibration JSON or RTI .lp file")
+      ->required()->check(CLI::ExistingFile);
+  c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
+      ->check(CLI::ExistingDirectory);
+  c->add_option("-o,--out", args->out, "Output folder (replaced as a whole, only on success)")->required();
+  c->add_option("--held-out", args->held_out,
+                "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
+      ->check(CLI::ExistingFile);
+  c->add_option("--method", args->method, "fast (variable projection) or ceres (ceres::Solve reference)")
+      ->check(CLI::IsMember({"fast", "ceres"}))->capture_default_str()->group("Fit");
+  c->add_option("--noise-sigma", args->options.fit.noise_sigma,
+                "Radiance noise per channel (linear units, 1 = white): diffuse-only test, outliers")
+      ->capture_default_str()->group("Fit");
+  c->add_option("--min-samples", args->options.fit.min_samples,
+                "Usable samples a texel needs for a lobe fit (fewer: diffuse-only fallback)")
+      ->capture_default_str()->group("Fit");
+  c->add_option("--k-max", args->options.fit.k_max, "Largest lobe exponent k")
+      ->capture_default_str()->group("Fit");
+  c->add_option("--max-specular-albedo", args->options.fit.max_specular_albedo,
+                "Energy bound of the lobe: rho_s 2 pi / (k + 2) <= this (raise for uncalibrated lights)")
+      ->capture_default_str()->group("Fit");
+  c->add_option("--dark-outlier-ratio", args->options.dark_outlier_ratio,
+                "Samples below this share of the diffuse floor are unmodelled shadows (<= 0: keep all)")
+      ->capture_default_str()->group("Fit");
+  c->add_option("--min-cos", args->options.samples.min_cos,
+                "n.v and n.l must exceed this (0 = anything above the horizon)")
+      ->capture_default_str()->group("Samples");
+  c->add_flag("!--no-shadow-rays", args->options.samples.shadow_rays,
+              "Do not reject samples whose light the relief blocks")->group("Samples");
+  c->add_flag("!--no-visibility-rays", args->options.samples.visibility_rays,
+              "Do not reject samples whose texel the relief hides from the camera")->group("Samples");
+  c->add_flag("!--no-skip", args->options.samples.trace.skip_unblockable,
+              "Trace every ray (no skipping of rays that cannot be blocked; for comparison)")
+      ->group("Samples");
+  c->add_option("--saturation", args->photo.saturation_encoded,
+                "Encoded level (0..1) at or above which an 8/16-bit channel is saturated")
+      ->capture_default_str()->group("Photos");
+  c->add_option("--rti-pitch-mm", args->photo.rti_pixel_pitch_mm,
+                "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+  c->add_option("--tile-texels", args->options.tile_texels,
+                "Texels sampled and fitted at a time (memory: ~ tile x photos x 48 bytes)")
+      ->capture_default_str()->group("Performance");
+  c->add_option("--threads", args->threads, "Worker threads (0 = all cores)")
+      ->capture_default_str()->group("Performance");
+  c->callback([args, &exit_code] { exit_code = RunFit(*args); });
+}
+
+}  // namespace digitize::cli
