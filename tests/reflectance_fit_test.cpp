@@ -1,0 +1,349 @@
+// Samples from photos and the fit stage on analytic scenes: a flat (or ridged) canvas seen by an
+// orthographic camera straight above, whose pixels are the canvas texels, lit by directional
+// lights; the photos are rendered here in closed form, so every sample and fitted value has an
+// exact expected value. The stress cases that need no generator live here too.
+#include "digitize/reflectance_fit.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <vector>
+
+#include "digitize/reflectance_samples.h"
+#include "digitize/relight.h"
+#include "digitize/tangent_frame.h"
+
+namespace digitize {
+namespace {
+
+constexpr double kPitch = 0.5;  // mm per texel and per pixel
+
+HeightField FlatCanvas(int w, int h) {
+  HeightField f;
+  f.height_mm = Grid<float>(w, h, 0.0f);
+  f.state = Grid<TexelState>(w, h, TexelState::kMeasured);
+  f.pitch_mm = kPitch;
+  return f;
+}
+
+// Orthographic camera 1 m above the canvas, looking down, pixel (x, y) = texel (x, y).
+Camera TopCamera(int w, int h) {
+  Camera c;
+  c.model = CameraModel::kOrthographic;
+  c.width = w;
+  c.height = h;
+  c.pixel_pitch_mm = kPitch;
+  c.camera_from_scan.rotation << 1, 0, 0, 0, -1, 0, 0, 0, -1;
+  c.camera_from_scan.translation = {-0.5 * kPitch, (h - 0.5) * kPitch, 1000.0};
+  return c;
+}
+
+Light Directional(double elevation_deg, double azimuth_deg, float irradiance = 1.0f) {
+  const double e = elevation_deg * M_PI / 180, a = azimuth_deg * M_PI / 180;
+  Light l;
+  l.type = LightType::kDirectional;
+  l.direction = Vec3d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)).normalized();
+  l.irradiance = Vec3f::Constant(irradiance);
+  return l;
+}
+
+// Photos of a flat canvas with one Lafortune material, rendered exactly (no shadows: flat).
+PhotoSet RenderFlat(const HeightField& canvas, const LafortuneParams& m,
+                    const std::vector<Light>& lights) {
+  PhotoSet set;
+  set.source = "analytic.json";
+  const Camera cam = TopCamera(canvas.width(), canvas.height());
+  for (size_t i = 0; i < lights.size(); ++i) {
+    Photo p;
+    p.entry = "analytic.json: images[" + std::to_string(i) + "]";
+    p.path = "img" + std::to_string(i) + ".exr";
+    p.camera = cam;
+    p.light = lights[i];
+    p.encoding = ColourEncoding::kLinear;
+    p.rgb = Grid<Vec3f>(cam.width, cam.height);
+    const Vec3f v(0, 0, 1);
+    const Vec3f l = lights[i].direction.cast<float>();
+    const Vec3f f = EvaluateLafortune(m, v, l);
+    for (Vec3f& c : p.rgb.data) c = f.cwiseProduct(lights[i].irradiance) * std::max(0.0f, l.z());
+    set.photos.push_back(std::move(p));
+  }
+  return set;
+}
+
+std::vector<Light> Dome(int n, double min_elev = 20, double max_elev = 80) {
+  std::vector<Light> out;
+  for (int i = 0; i < n; ++i)
+    out.push_back(Directional(min_elev + (max_elev - min_elev) * (i + 0.5) / n, 137.5 * i));
+  return out;
+}
+
+Grid<Vec3f> UpNormals(const HeightField& f) { return Grid<Vec3f>(f.width(), f.height(), Vec3f::UnitZ()); }
+
+TEST(ReflectanceSamples, FlatCanvasSamplesAreExact) {
+  const HeightField canvas = FlatCanvas(12, 10);
+  LafortuneParams m;
+  m.rho_d = {0.2f, 0.1f, 0.05f};
+  const std::vector<Light> lights = Dome(6);
+  const PhotoSet set = RenderFlat(canvas, m, lights);
+  const Grid<Vec3f> normals = UpNormals(canvas);
+  auto tracer = HeightFieldTracer::Build(canvas);
+  ASSERT_TRUE(tracer.ok()) << tracer.error().message;
+  const SampleScene scene{&canvas, &normals, RigidTransform{}, &set, &*tracer};
+  ASSERT_TRUE(ValidateSampleScene(scene).ok());
+  std::vector<uint32_t> texels = {0, 5, 119};
+  BrdfSamples samples;
+  SampleStats stats;
+  GatherSamples(scene, texels, {}, samples, stats);
+  ASSERT_EQ(samples.texel_count(), 3u);
+  EXPECT_EQ(stats.candidates, 3u * lights.size());
+  EXPECT_EQ(stats.kept, 3u * lights.size());
+  for (size_t t = 0; t < 3; ++t) {
+    ASSERT_EQ(samples.Texel(t).size(), lights.size());
+    for (size_t i = 0; i < lights.size(); ++i) {
+      const BrdfSample& s = samples.Texel(t)[i];
+      // Flat canvas: the tangent frame is the canvas frame; float directions to ~1e-6.
+      EXPECT_NEAR((s.view_dir - Vec3f::UnitZ()).norm(), 0, 1e-6);
+      EXPECT_NEAR((s.light_dir - lights[i].direction.cast<float>()).norm(), 0, 1e-6);
+      const float cos_l = static_cast<float>(lights[i].direction.z());
+      EXPECT_NEAR(s.irradiance.x(), cos_l, 1e-6);
+      EXPECT_NEAR(s.radiance.x(), 0.2f * cos_l, 1e-6);
+    }
+  }
+  // Flat: every upward ray is proven free, none traced.
+  EXPECT_EQ(stats.light_rays.skipped, stats.light_rays.rays);
+  EXPECT_EQ(stats.shadowed + stats.hidden, 0u);
+}
+
+TEST(ReflectanceFit, RecoversAGlossyFlatMaterialExactly) {
+  const HeightField canvas = FlatCanvas(8, 8);
+  LafortuneParams m;
+  m.rho_d = {0.15f, 0.10f, 0.05f};
+  m.rho_s = {0.6f, 0.6f, 0.6f};
+  m.k = 12;
+  // One camera above: directions vary only through the lights, so spread them widely.
+  const PhotoSet set = RenderFlat(canvas, m, Dome(48, 15, 88));
+  ReflectanceFitOptions o;
+  o.fit.noise_sigma = 1e-4;
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, o);
+  ASSERT_TRUE(fit.ok()) << fit.error().message;
+  const LafortuneParams p = fit->maps.At(3, 4);
+  // Noise-free samples of the fitted family: the fit is exact up to solver tolerance. cx, cy are
+  // weakly determined with v = z (only vz lz matters at vx = vy = 0), so the lobe is judged by
+  // relighting below rather than by (cx, cy).
+  EXPECT_NEAR(p.rho_d.x(), 0.15f, 2e-3);
+  EXPECT_NEAR(p.rho_s.x(), 0.6f, 0.03);
+  EXPECT_NEAR(std::log10(p.k), std::log10(12.0), 0.02);
+  EXPECT_EQ(fit->maps.status(3, 4), TexelFitStatus::kConverged);
+  // Held-out lights, relit: radiance within 1 % of the peak.
+  auto tracer = HeightFieldTracer::Build(canvas);
+  const PhotoSet held = RenderFlat(canvas, m, {Directional(63, 10), Directional(33, 250)});
+  auto score = EvaluateHeldOut(canvas, UpNormals(canvas), fit->maps, {}, held);
+  ASSERT_TRUE(score.ok()) << score.error().message;
+  EXPECT_GT(score->psnr_db, 50.0);
+  EXPECT_EQ(score->pixels, 2u * 64u);
+}
+
+TEST(ReflectanceFit, OnePhotoFallsBackToADiffuseFitOfIt) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.3f);
+  const PhotoSet set = RenderFlat(canvas, m, {Directional(50, 0)});
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  for (size_t i = 0; i < fit->maps.status.size(); ++i) {
+    EXPECT_EQ(fit->maps.status.data[i], TexelFitStatus::kTooFewSamples);
+    EXPECT_NEAR(fit->maps.rho_d.data[i].x(), 0.3f, 1e-4);  // the one sample explains rho_d
+    EXPECT_EQ(fit->maps.rho_s.data[i].maxCoeff(), 0.0f);
+  }
+}
+
+TEST(ReflectanceFit, IdenticalLightsGiveAFiniteFitThatRelightsThatLight) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.1f);
+  m.rho_s = Vec3f::Constant(0.5f);
+  m.k = 20;
+  const PhotoSet set = RenderFlat(canvas, m, std::vector<Light>(16, Directional(60, 30)));
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  ASSERT_TRUE(fit->maps.Validate().ok());
+  const PhotoSet same = RenderFlat(canvas, m, {Directional(60, 30)});
+  auto score = EvaluateHeldOut(canvas, UpNormals(canvas), fit->maps, {}, same);
+  ASSERT_TRUE(score.ok());
+  EXPECT_GT(score->psnr_db, 45.0);  // what was seen is reproduced; nothing else is knowable
+}
+
+TEST(ReflectanceFit, LightsAtAndBelowTheHorizonAreRejectedNotFitted) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.2f);
+  std::vector<Light> lights = Dome(12);
+  lights.push_back(Directional(-10, 0));  // below the canvas
+  lights.push_back(Directional(-89, 45));
+  lights.push_back(Directional(1, 90));   // grazing: 89 deg from the normal, kept
+  PhotoSet set = RenderFlat(canvas, m, lights);
+  // Below the canvas the photos show what an actual light there would: nothing.
+  for (size_t i = 12; i < 14; ++i)
+    for (Vec3f& c : set.photos[i].rgb.data) c = Vec3f::Zero();
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  EXPECT_EQ(fit->report.samples.light_below_horizon, 2u * 36u);
+  EXPECT_NEAR(fit->maps.rho_d(2, 2).x(), 0.2f, 1e-3);
+}
+
+TEST(ReflectanceFit, BlackPaintGivesZeroNotNaN) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  const PhotoSet set = RenderFlat(canvas, LafortuneParams{}, Dome(16));
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  EXPECT_EQ(fit->report.samples.black, 16u * 36u);  // clipped at the floor: no information
+  for (size_t i = 0; i < fit->maps.rho_d.size(); ++i) {
+    EXPECT_EQ(fit->maps.rho_d.data[i], Vec3f::Zero());  // stated fallback: zeros, relight black
+    EXPECT_EQ(fit->maps.status.data[i], TexelFitStatus::kTooFewSamples);
+  }
+}
+
+TEST(ReflectanceFit, NaNAndSaturatedPixelsAreDroppedAndCounted) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.2f);
+  PhotoSet set = RenderFlat(canvas, m, Dome(16));
+  // Photo 0: pixel (2, 2) is NaN (the loader zeroes it and flags it); photo 1: (4, 4) saturated.
+  set.photos[0].flags = Grid<uint8_t>(6, 6, 0);
+  set.photos[0].flags(2, 2) = kPixelNonFinite;
+  set.photos[0].rgb(2, 2) = Vec3f::Zero();
+  set.photos[1].flags = Grid<uint8_t>(6, 6, 0);
+  set.photos[1].flags(4, 4) = kPixelSaturated;
+  set.photos[1].rgb(4, 4) = Vec3f::Constant(1.0f);
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  // The sample point of texel (x, y) is pixel (x, y) exactly: one texel per flagged pixel.
+  EXPECT_EQ(fit->report.samples.non_finite, 1u);
+  EXPECT_EQ(fit->report.samples.saturated, 1u);
+  EXPECT_NEAR(fit->maps.rho_d(2, 2).x(), 0.2f, 1e-3);
+  EXPECT_NEAR(fit->maps.rho_d(4, 4).x(), 0.2f, 1e-3);
+}
+
+// A canvas with a tall wall along its left edge: lights low from the right... from the LEFT
+// (azimuth 180, elevation e) shadow every texel within H / tan(e) of the wall.
+HeightField WalledCanvas(int w, int h, float wall_mm) {
+  HeightField f = FlatCanvas(w, h);
+  for (int y = 0; y < h; ++y) f.height_mm(0, y) = f.height_mm(1, y) = wall_mm;
+  return f;
+}
+
+TEST(ReflectanceFit, EverySampleShadowedGivesTheStatedFallbackEverywhere) {
+  const int w = 16, h = 8;
+  const HeightField canvas = WalledCanvas(w, h, 1000.0f);  // casts a shadow over everything
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.2f);
+  std::vector<Light> lights;
+  for (int i = 0; i < 12; ++i) lights.push_back(Directional(10 + 5 * i, 180 + (i % 3 - 1) * 10));
+  PhotoSet set = RenderFlat(canvas, m, lights);
+  for (Photo& p : set.photos)
+    for (int y = 0; y < h; ++y)
+      for (int x = 2; x < w; ++x) p.rgb(x, y) = Vec3f::Zero();  // in the wall's shadow
+  Grid<Vec3f> normals = UpNormals(canvas);
+  auto fit = FitReflectance(canvas, normals, {}, set, {});
+  ASSERT_TRUE(fit.ok());
+  ASSERT_TRUE(fit->maps.Validate().ok());
+  EXPECT_GT(fit->report.samples.shadowed, 0u);
+  for (int y = 0; y < h; ++y)
+    for (int x = 3; x < w; ++x) {
+      EXPECT_EQ(fit->maps.status(x, y), TexelFitStatus::kTooFewSamples) << x << "," << y;
+      EXPECT_EQ(fit->maps.rho_d(x, y), Vec3f::Zero());
+    }
+}
+
+TEST(ReflectanceFit, ShadowRaysRejectExactlyTheAnalyticShadow) {
+  const int w = 40, h = 4;
+  const float wall = 5.0f;  // mm; light at 45 deg from the left: shadow 5 mm = 10 texels
+  const HeightField canvas = WalledCanvas(w, h, wall);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.2f);
+  PhotoSet set = RenderFlat(canvas, m, {Directional(45, 180)});
+  Grid<Vec3f> normals = UpNormals(canvas);
+  auto tracer = HeightFieldTracer::Build(canvas);
+  ASSERT_TRUE(tracer.ok());
+  const SampleScene scene{&canvas, &normals, RigidTransform{}, &set, &*tracer};
+  for (bool skip : {true, false}) {
+    SampleOptions o;
+    o.trace.skip_unblockable = skip;
+    o.visibility_rays = false;
+    std::vector<uint32_t> row;
+    for (int x = 2; x < w; ++x) row.push_back(static_cast<uint32_t>(x + w));  // row 1
+    BrdfSamples samples;
+    SampleStats stats;
+    GatherSamples(scene, row, o, samples, stats);
+    // The wall's top edge is at X = 1.5 texels (centre of texel 1) -> 0.75 mm + 5 mm of shadow:
+    // texel centres at X = (x + 0.5) 0.5 mm < 5.75 mm, i.e. x <= 10, are shadowed (x = 2..10).
+    for (int x = 2; x < w; ++x)
+      EXPECT_EQ(samples.Texel(static_cast<size_t>(x - 2)).size(), x <= 10 ? 0u : 1u)
+          << "x " << x << " skip " << skip;
+    EXPECT_EQ(stats.shadowed, 9u);
+    if (skip) EXPECT_GT(stats.light_rays.skipped, 0u);
+    else EXPECT_EQ(stats.light_rays.skipped, 0u);
+  }
+}
+
+TEST(ReflectanceFit, InputErrorsNameTheEntry) {
+  const HeightField canvas = FlatCanvas(6, 6);
+  LafortuneParams m;
+  m.rho_d = Vec3f::Constant(0.2f);
+  PhotoSet set = RenderFlat(canvas, m, Dome(4));
+  {  // a camera under the canvas, looking up at its back
+    PhotoSet bad = set;
+    Camera& c = bad.photos[2].camera;
+    c.camera_from_scan.rotation << 1, 0, 0, 0, 1, 0, 0, 0, 1;
+    c.camera_from_scan.translation = {-1.5, -1.5, 1000};
+    auto fit = FitReflectance(canvas, UpNormals(canvas), {}, bad, {});
+    ASSERT_FALSE(fit.ok());
+    EXPECT_NE(fit.error().message.find("images[2]"), std::string::npos) << fit.error().message;
+  }
+  {  // pixels of another size than the camera
+    PhotoSet bad = set;
+    bad.photos[1].rgb = Grid<Vec3f>(5, 6);
+    auto fit = FitReflectance(canvas, UpNormals(canvas), {}, bad, {});
+    ASSERT_FALSE(fit.ok());
+    EXPECT_NE(fit.error().message.find("images[1]"), std::string::npos) << fit.error().message;
+  }
+  {  // normals of another size
+    auto fit = FitReflectance(canvas, Grid<Vec3f>(5, 5, Vec3f::UnitZ()), {}, set, {});
+    ASSERT_FALSE(fit.ok());
+  }
+  {  // bad options
+    ReflectanceFitOptions o;
+    o.tile_texels = 0;
+    EXPECT_FALSE(FitReflectance(canvas, UpNormals(canvas), {}, set, o).ok());
+  }
+}
+
+TEST(ReflectanceFit, MapsRoundTripThroughTheOutputFolder) {
+  const HeightField canvas = FlatCanvas(7, 5);
+  LafortuneParams m;
+  m.rho_d = {0.2f, 0.1f, 0.3f};
+  m.rho_s = Vec3f::Constant(0.4f);
+  m.k = 30;
+  const PhotoSet set = RenderFlat(canvas, m, Dome(24, 15, 88));
+  ReflectanceFitOptions o;
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, o);
+  ASSERT_TRUE(fit.ok());
+  const auto dir = std::filesystem::temp_directory_path() / "digitize_reflectance_roundtrip";
+  std::filesystem::remove_all(dir);
+  ASSERT_TRUE(WriteReflectanceOutputs(dir, *fit, o, {"analytic"}).ok());
+  auto back = ReadReflectanceMaps(dir);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->rho_d.data, fit->maps.rho_d.data);  // float EXR: bit-exact
+  EXPECT_EQ(back->lobe.data, fit->maps.lobe.data);
+  EXPECT_EQ(back->status.data, fit->maps.status.data);
+  std::filesystem::remove(dir / "lobe.exr");
+  auto missing = ReadReflectanceMaps(dir);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.error().message.find("lobe.exr"), std::string::npos);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace digitize
