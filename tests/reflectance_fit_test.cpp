@@ -226,8 +226,8 @@ TEST(ReflectanceFit, NaNAndSaturatedPixelsAreDroppedAndCounted) {
   EXPECT_NEAR(fit->maps.rho_d(4, 4).x(), 0.2f, 1e-3);
 }
 
-// A canvas with a tall wall along its left edge: lights low from the right... from the LEFT
-// (azimuth 180, elevation e) shadow every texel within H / tan(e) of the wall.
+// A canvas with a tall wall along its left edge: lights from the left (azimuth 180, elevation e)
+// shadow every texel within H / tan(e) of the wall.
 HeightField WalledCanvas(int w, int h, float wall_mm) {
   HeightField f = FlatCanvas(w, h);
   for (int y = 0; y < h; ++y) f.height_mm(0, y) = f.height_mm(1, y) = wall_mm;
@@ -244,7 +244,7 @@ TEST(ReflectanceFit, EverySampleShadowedGivesTheStatedFallbackEverywhere) {
   PhotoSet set = RenderFlat(canvas, m, lights);
   for (Photo& p : set.photos)
     for (int y = 0; y < h; ++y)
-      for (int x = 2; x < w; ++x) p.rgb(x, y) = Vec3f::Zero();  // in the wall's shadow
+      for (int x = 2; x < w; ++x) p.rgb(x, y) = Vec3f::Constant(0.01f);  // shadow + stray light
   Grid<Vec3f> normals = UpNormals(canvas);
   auto fit = FitReflectance(canvas, normals, {}, set, {});
   ASSERT_TRUE(fit.ok());
