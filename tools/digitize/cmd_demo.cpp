@@ -1,5 +1,6 @@
 #include <cstdio>
 #include <algorithm>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -183,8 +184,11 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
               "Paint one region with a measured 3-lobe paint (not in the fitted model)")
       ->group("Photos");
   c->add_flag("--no-fit", args->no_fit, "Stop after preprocessing")->group("Photos");
-  c->add_option("--fit-method", args->fit.fit.method, "0 = fast, 1 = ceres::Solve reference")
-      ->group("Fit");
+  const std::map<std::string, BrdfFitMethod> methods = {
+      {"fast", BrdfFitMethod::kFast}, {"ceres", BrdfFitMethod::kCeresReference}};
+  c->add_option("--fit-method", args->fit.fit.method,
+                "fast (variable projection) or ceres (ceres::Solve reference)")
+      ->transform(CLI::CheckedTransformer(methods, CLI::ignore_case))->group("Fit");
   c->callback([args, &exit_code] { exit_code = RunDemo(*args); });
 }
 
