@@ -1,5 +1,6 @@
 # gnuplot script: docs/bench_fit.png from docs/bench_fit.csv (written by fit_bench).
 set datafile separator ","
+set datafile columnheaders
 set terminal pngcairo size 1400,520 font "DejaVu Sans,11" noenhanced
 set output "docs/bench_fit.png"
 set multiplot layout 1,2
