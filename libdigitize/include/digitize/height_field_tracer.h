@@ -6,14 +6,21 @@
 // GEOMETRY. The surface is the triangulated texel grid in the CANVAS frame (mm): one vertex per
 // texel centre at (TexelCentreMm(x, y), height_mm(x, y)), two triangles per quad of four texel
 // centres -- the same surface the generator's Scene traces, and the one normals.h differentiates.
+// Like the Scene's canvas, it is extended by half a texel to the canvas outline (a ring of
+// vertices at X = 0, X = width x pitch, Y = 0, Y = height x pitch repeating the border texels'
+// heights), so it covers the whole canvas rectangle and a ray through a border texel's centre
+// meets it inside a quad, not on the rim where a watertight test may let it pass; texel
+// coordinates of hits therefore run over [-0.5, width - 0.5] x [-0.5, height - 0.5].
 // Every texel takes part (kOutside texels hold height 0, the canvas plane: they block nothing
 // above it). Built as Embree grid primitives (RTC_GEOMETRY_TYPE_GRID, pieces of <= 256 x 256 quads).
 //
 // SKIPPING RAYS THAT CANNOT BE BLOCKED. A ray leaving a point at height h upwards (dz > 0) can only
 // hit relief higher than h, and only within the horizontal reach r = (H - h) / tan(elevation) where
 // H bounds the relief it can meet. Occluded() first bounds H with the global max height, then
-// refines it with a max-pyramid (per-block maxima over power-of-two blocks) over the square of
-// radius r around the origin, a few rounds; a ray whose bound falls to <= h (+ epsilon) is
+// refines it with a max-pyramid (per-block maxima over power-of-two blocks) over the ray's
+// horizontal footprint up to min(tfar, reach) -- the bounding box of the segment from the origin
+// to distance r along the ray's azimuth, a part of the square of radius r around the origin,
+// rounded out to whole texels -- a few rounds; a ray whose bound falls to <= h (+ epsilon) is
 // skipped (not blocked), and a traced ray gets tfar cut to its reach. Rays going down or level
 // (dz <= 0) are always traced (with their own tfar). The skip is exact (never skips a ray that
 // Embree would report blocked, up to the epsilon below), so results with and without skipping agree;
@@ -37,7 +44,12 @@ namespace digitize {
 struct TraceOptions {
   bool skip_unblockable = true;  // skip rays that the max-pyramid proves free
   double origin_offset_mm = -1;  // < 0: 1e-3 x pitch_mm
-  int num_threads = 0;           // 0 = all cores (batches run in parallel with TBB)
+  int num_threads = 0;           // 0 = all cores (batches run in parallel with TBB); spans of
+                                 // up to 1024 rays always run on the calling thread
+
+  // origin_offset_mm finite, num_threads >= 0. Occluded / Intersect throw InvariantError
+  // otherwise (options are the caller's code, not user input).
+  Status Validate() const;
 };
 
 // Counts of one or many Occluded calls (add them up with +=).
@@ -82,6 +94,9 @@ class HeightFieldTracer {
                  std::span<SurfaceHit> hits, const TraceOptions& options = {}) const;
 
   float max_height_mm() const;
+  // Memory held: the shared vertex buffer, the max-pyramid and Embree's own allocations (its
+  // memory monitor), bytes. About 17 bytes per texel.
+  size_t memory_bytes() const;
   double pitch_mm() const;
   int width() const;
   int height() const;

@@ -30,16 +30,23 @@ namespace digitize {
 struct RelightOptions {
   bool shadows = true;  // cast shadow rays against the relief
   int num_threads = 0;  // 0 = all cores
+
+  Status Validate() const;  // num_threads >= 0 (RenderRelit throws InvariantError otherwise)
 };
 
 struct RelitImage {
   Grid<Vec3f> rgb;      // linear radiance, camera size
   Grid<uint8_t> mask;   // 1 where the pixel sees a canvas texel (not kOutside), else 0
-  size_t shadowed_pixels = 0;  // canvas pixels whose light was blocked
+  // Canvas pixels whose light was blocked. Shadow rays are cast only from pixels that face both
+  // the camera and the light (n.v > 0, n.l > 0): the others are dark anyway and not counted.
+  size_t shadowed_pixels = 0;
 };
 
 // `tracer` must be built from `canvas`; `normals` and `maps` have the canvas's size (checked:
-// throws InvariantError otherwise -- a programming error, not input).
+// throws InvariantError otherwise -- a programming error, not input). Orthographic cameras cast
+// their rays from their z = 0 plane (what is behind it is not seen, as in Camera::InFront).
+// Pixels on the canvas's outer half-texel (between the border texel centres and the canvas
+// outline, see height_field_tracer.h) take the border texels' reflectance and normals.
 RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canvas,
                        const Grid<Vec3f>& normals, const ReflectanceMaps& maps,
                        const RigidTransform& canvas_from_scan, const Camera& camera,
