@@ -229,12 +229,48 @@ Scene::Scene(const Painting& painting, const FrameOptions& frame)
 
 Scene::~Scene() = default;
 
+namespace {
+
+// Fills an Embree ray; a zero or non-finite direction or origin gives an empty ray (tfar < tnear).
+void SetRay(RTCRay& ray, const Vec3d& o, const Vec3d& direction, float max_t, unsigned id) {
+  Vec3d d = direction;
+  const double len = d.norm();
+  const bool valid = len > 0 && std::isfinite(len) && o.allFinite();
+  if (valid) d /= len;
+  ray.org_x = static_cast<float>(o.x());
+  ray.org_y = static_cast<float>(o.y());
+  ray.org_z = static_cast<float>(o.z());
+  ray.dir_x = static_cast<float>(d.x());
+  ray.dir_y = static_cast<float>(d.y());
+  ray.dir_z = static_cast<float>(d.z());
+  ray.tnear = 0.0f;
+  ray.tfar = valid ? max_t : -1.0f;
+  ray.time = 0.0f;
+  ray.mask = 0xFFFFFFFFu;
+  ray.id = id;
+  ray.flags = 0;
+}
+
+}  // namespace
+
 void Scene::Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
                       std::vector<RayHit>& hits) const {
+  IntersectImpl(origins, directions, nullptr, hits);
+}
+
+void Scene::Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                      const std::vector<float>& max_t_mm, std::vector<RayHit>& hits) const {
+  DIGITIZE_CHECK(max_t_mm.size() == origins.size(), "Scene::Intersect: size mismatch");
+  IntersectImpl(origins, directions, &max_t_mm, hits);
+}
+
+void Scene::IntersectImpl(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                          const std::vector<float>* max_t_mm, std::vector<RayHit>& hits) const {
   DIGITIZE_CHECK(origins.size() == directions.size(), "Scene::Intersect: size mismatch");
   hits.assign(origins.size(), RayHit{});
   const size_t n = origins.size();
   const size_t batches = (n + kRayBatch - 1) / kRayBatch;
+  constexpr float kInf = std::numeric_limits<float>::infinity();
   tbb::parallel_for(tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
     std::array<RTCRayHit, kRayBatch> rays;
     RTCIntersectContext context;
@@ -243,26 +279,9 @@ void Scene::Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d
     for (size_t batch = r.begin(); batch < r.end(); ++batch) {
       const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
       for (size_t k = 0; k < count; ++k) {
-        const Vec3d& o = origins[first + k];
-        Vec3d d = directions[first + k];
-        double len = d.norm();
         RTCRayHit& ray = rays[k];
-        ray.ray.org_x = static_cast<float>(o.x());
-        ray.ray.org_y = static_cast<float>(o.y());
-        ray.ray.org_z = static_cast<float>(o.z());
-        if (len > 0 && std::isfinite(len)) d /= len;
-        ray.ray.dir_x = static_cast<float>(d.x());
-        ray.ray.dir_y = static_cast<float>(d.y());
-        ray.ray.dir_z = static_cast<float>(d.z());
-        ray.ray.tnear = 0.0f;
-        // A zero or non-finite direction hits nothing.
-        ray.ray.tfar = (len > 0 && std::isfinite(len) && o.allFinite())
-                           ? std::numeric_limits<float>::infinity()
-                           : -1.0f;
-        ray.ray.time = 0.0f;
-        ray.ray.mask = 0xFFFFFFFFu;
-        ray.ray.id = static_cast<unsigned>(k);
-        ray.ray.flags = 0;
+        SetRay(ray.ray, origins[first + k], directions[first + k],
+               max_t_mm ? (*max_t_mm)[first + k] : kInf, static_cast<unsigned>(k));
         ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
         ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
       }
@@ -279,6 +298,34 @@ void Scene::Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d
         normal.normalize();
         if (normal.dot(dir) > 0) normal = -normal;
         out.normal = normal;
+      }
+    }
+  });
+}
+
+void Scene::Occluded(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                     const std::vector<float>& max_t_mm, std::vector<uint8_t>& blocked) const {
+  DIGITIZE_CHECK(origins.size() == directions.size() && origins.size() == max_t_mm.size(),
+                 "Scene::Occluded: size mismatch");
+  const size_t n = origins.size();
+  blocked.assign(n, 0);
+  const size_t batches = (n + kRayBatch - 1) / kRayBatch;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
+    std::array<RTCRay, kRayBatch> rays;
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    for (size_t batch = r.begin(); batch < r.end(); ++batch) {
+      const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
+      for (size_t k = 0; k < count; ++k) {
+        SetRay(rays[k], origins[first + k], directions[first + k], max_t_mm[first + k],
+               static_cast<unsigned>(k));
+      }
+      rtcOccluded1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
+                    sizeof(RTCRay));
+      // Embree marks a blocked ray by setting tfar to -inf; an empty ray keeps its tfar of -1.
+      for (size_t k = 0; k < count; ++k) {
+        blocked[first + k] = rays[k].tfar == -std::numeric_limits<float>::infinity() ? 1 : 0;
       }
     }
   });

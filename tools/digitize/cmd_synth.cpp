@@ -1,9 +1,11 @@
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 
 #include "commands.h"
 #include "digitize/output_dir.h"
 #include "digitize_synth/painting.h"
+#include "digitize_synth/photo_sim.h"
 #include "digitize_synth/scan_sim.h"
 #include "digitize_synth/synth_io.h"
 #include "progress_bar.h"
@@ -19,6 +21,10 @@ struct SynthArgs {
   std::string model = "ortho";
   std::vector<int> scan_size;
   bool no_frame = false, no_weave = false, no_strokes = false, no_impasto = false, no_cracks = false;
+  // Photo set (--photos).
+  bool photos = false, measured = false;
+  synth::PhotoSimOptions photo;
+  std::string photo_encoding = "srgb8";
 };
 
 int RunSynth(SynthArgs args) {
@@ -35,25 +41,52 @@ int RunSynth(SynthArgs args) {
     args.scan.height_px = args.scan_size[1];
   }
   args.scan.seed = args.painting.seed;
+  args.photo.seed = args.painting.seed;
+  args.photo.encoding = args.photo_encoding == "srgb16" ? synth::PhotoEncoding::kSrgb16
+                        : args.photo_encoding == "exr"  ? synth::PhotoEncoding::kLinearExr
+                                                        : synth::PhotoEncoding::kSrgb8;
+  std::vector<synth::PaintMaterial> materials;
+  if (args.photos) {
+    materials = synth::DefaultPaintMaterials(args.measured);
+    // Every material on some region (region i gets material i % count).
+    args.painting.region_count =
+        std::max(args.painting.region_count, static_cast<int>(materials.size()));
+  }
   if (Status s = args.painting.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.scan.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.photo.Validate(); args.photos && !s.ok()) return Fail(cmd, s.message());
 
   ProgressBar bar("synth");
+  // Shares of the bar: the photo set takes most of the time when there is one.
+  const double render_share = args.photos ? 0.6 : 0.0;
+  const double k = 1.0 - render_share;
   bar.Update("painting", 0.0);
   const synth::Painting painting = synth::MakePainting(args.painting);
-  bar.Update("scene", 0.3);
+  bar.Update("scene", 0.3 * k);
   const synth::Scene scene(painting, args.frame);
-  bar.Update("scan", 0.45);
+  bar.Update("scan", 0.45 * k);
   const synth::SyntheticScan scan = synth::SimulateScan(scene, args.scan);
-  bar.Update("writing", 0.7);
+  synth::SyntheticPhotoSet photos;
+  if (args.photos) {
+    const double from = 0.7 * k;
+    photos = synth::SimulatePhotoSet(
+        scene, scan.canvas_from_scan, args.photo, materials,
+        [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); });
+  }
+  bar.Update("writing", 0.7 * k + render_share);
   Status written = WriteDirectoryAtomically(args.out, [&](const std::filesystem::path& dir) {
-    return synth::WriteSyntheticScan(dir, painting, scan);
+    if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
+    if (!args.photos) return Status::Ok();
+    return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
   });
   bar.Finish();
   if (!written.ok()) return Fail(cmd, written.message());
   std::printf("synthetic painting %.0f x %.0f mm, %dx%d texels; scan %dx%d (%zu exposure(s)) -> %s/\n",
               painting.width_mm, painting.height_mm, painting.truth.width(), painting.truth.height(),
               args.scan.width_px, args.scan.height_px, scan.exposures.size(), args.out.c_str());
+  if (args.photos) {
+    std::printf("photo set: %s -> %s/photos/\n", photos.Brief().c_str(), args.out.c_str());
+  }
   return 0;
 }
 
@@ -100,6 +133,29 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   c->add_option("--hole-blobs", s.hole_blobs, "Blob-shaped holes")->capture_default_str()->group("Scan");
   c->add_option("--outliers", s.outliers, "Share of outlier samples")->capture_default_str()->group("Scan");
   c->add_option("--exposures", s.exposures, "Exposures of the same pose")->capture_default_str()->group("Scan");
+  auto& ph = args->photo;
+  CLI::Option* photos =
+      c->add_flag("--photos", args->photos,
+                  "Also render a photo set of the painting (calibration in the scan frame, "
+                  "held-out renders, reflectance truth) into <out>/photos/")
+          ->group("Photos");
+  c->add_option("--lights", ph.lights, "Point lights on a dome around the canvas (count)")
+      ->capture_default_str()->needs(photos)->group("Photos");
+  c->add_option("--cameras", ph.cameras,
+                "Cameras on an arc through the canvas normal (count; 1 = straight above)")
+      ->capture_default_str()->needs(photos)->group("Photos");
+  c->add_option("--photo-encoding", args->photo_encoding,
+                "Image files: 8-bit sRGB PNG, 16-bit sRGB PNG, or linear float EXR")
+      ->check(CLI::IsMember({"srgb8", "srgb16", "exr"}))->capture_default_str()->needs(photos)
+      ->group("Photos");
+  c->add_option("--photo-noise", ph.noise_sigma,
+                "Gaussian noise sigma of the fitting images (linear radiance; white Lambertian at "
+                "normal incidence reads 0.8)")
+      ->capture_default_str()->needs(photos)->group("Photos");
+  c->add_flag("--measured", args->measured,
+              "Add a measured paint (bluepaint, Lafortune 1997) outside the fitted one-lobe family "
+              "as a 7th material (off by default)")
+      ->needs(photos)->group("Photos");
   c->callback([args, &exit_code] { exit_code = RunSynth(*args); });
 }
 

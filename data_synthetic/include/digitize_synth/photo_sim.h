@@ -101,6 +101,13 @@ struct SyntheticPhotoSet {
   RigidTransform canvas_from_scan;
   PhotoSimOptions options;
   size_t saturated_pixels = 0;  // over the fitting images, after encoding
+  // Over the fitting images: canvas pixels facing the light (n.l > 0, n.v > 0), and those of them
+  // whose shadow ray is blocked (relief or frame).
+  size_t canvas_lit_pixels = 0, shadowed_pixels = 0;
+  double render_seconds = 0;  // wall time of SimulatePhotoSet
+  // "64 images 1188x891 (1 camera(s) x 64 lights, srgb8) + 16 held-out; 67.7 Mpx; 1234 saturated
+  // px (0.00 %), 2.1 % of lit canvas px in shadow; 8.10 s"
+  std::string Brief() const;
 };
 
 // Invalid options throw (validate first). `materials` empty: DefaultPaintMaterials(false).

@@ -20,7 +20,7 @@ struct FrameOptions {
 };
 
 // Canvas-frame scene: the painting's grid surface, the frame (boxes around it) and the wall. Kept
-// alive for ray queries (photo sets in later issues reuse it).
+// alive for ray queries (the photo-set renderer, photo_sim.h, reuses it).
 //
 // Geometry (canvas frame, mm; W x H = painting.width_mm x painting.height_mm):
 //   - canvas: an Embree grid through the texel centres (two triangles per quad), extended by a
@@ -48,10 +48,21 @@ class Scene {
   // Rays in the canvas frame (mm). Thread-safe. direction need not be unit.
   void Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
                  std::vector<RayHit>& hits) const;
+  // The same, each ray ending at distance max_t_mm[i] along its direction (a segment: hits
+  // beyond are not reported). Shadow rays that must say WHAT blocks the light use this.
+  void Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                 const std::vector<float>& max_t_mm, std::vector<RayHit>& hits) const;
+  // Shadow rays: blocked[i] = 1 when anything lies on the segment from origins[i] along
+  // directions[i] (need not be unit) up to distance max_t_mm[i], else 0. An any-hit query, about
+  // twice as fast as Intersect. Thread-safe. A zero or non-finite direction is never blocked.
+  void Occluded(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                const std::vector<float>& max_t_mm, std::vector<uint8_t>& blocked) const;
   const Painting& painting() const { return painting_; }
   const FrameOptions& frame() const { return frame_; }
 
  private:
+  void IntersectImpl(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
+                     const std::vector<float>* max_t_mm, std::vector<RayHit>& hits) const;
   struct Impl;
   const Painting& painting_;
   FrameOptions frame_;

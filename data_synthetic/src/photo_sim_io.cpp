@@ -1,0 +1,307 @@
+// A synthetic photo set on disk (photo_sim.h, WriteSyntheticPhotoSet): the calibration JSON that
+// digitize::ReadCalibration reads, the encoded images, the held-out renders and masks, the truth.
+#include <OpenImageIO/imageio.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "digitize/image_io.h"
+#include "digitize_synth/photo_sim.h"
+
+namespace digitize::synth {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr int kMaterialsFormatVersion = 1;
+
+json Vec(const Vec3d& v) { return {v.x(), v.y(), v.z()}; }
+json Vec(const Vec3f& v) { return {v.x(), v.y(), v.z()}; }
+
+json TransformJson(const RigidTransform& t) {
+  json rows = json::array();
+  for (int r = 0; r < 3; ++r) rows.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
+  return {{"rotation", rows}, {"translation_mm", Vec(t.translation)}};
+}
+
+// docs/formats.md, "Calibration JSON": numbers printed to round trip (nlohmann writes the
+// shortest text that reads back to the same double).
+json CameraJson(const Camera& c) {
+  DIGITIZE_CHECK(c.model == CameraModel::kPinhole, "synthetic photo sets use pinhole cameras");
+  return {{"model", "pinhole"}, {"width", c.width},   {"height", c.height},
+          {"fx", c.fx},         {"fy", c.fy},         {"cx", c.cx},
+          {"cy", c.cy},         {"camera_from_scan", TransformJson(c.camera_from_scan)}};
+}
+
+json LightJson(const Light& l) {
+  DIGITIZE_CHECK(l.type == LightType::kPoint, "synthetic photo sets use point lights");
+  return {{"type", "point"}, {"position_mm", Vec(l.position_mm)}, {"intensity", Vec(l.intensity)}};
+}
+
+bool SameCamera(const Camera& a, const Camera& b) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy &&
+         a.cx == b.cx && a.cy == b.cy && a.camera_from_scan.rotation == b.camera_from_scan.rotation &&
+         a.camera_from_scan.translation == b.camera_from_scan.translation;
+}
+bool SameLight(const Light& a, const Light& b) {
+  return a.position_mm == b.position_mm && a.intensity == b.intensity;
+}
+
+// Calibration of a photo set with shared camera and light lists (each distinct one listed once).
+json CalibrationJson(const PhotoSet& set, const std::vector<std::string>& paths,
+                     const char* encoding) {
+  std::vector<const Camera*> cameras;
+  std::vector<const Light*> lights;
+  json images = json::array();
+  for (size_t i = 0; i < set.photos.size(); ++i) {
+    const Photo& p = set.photos[i];
+    auto c = std::find_if(cameras.begin(), cameras.end(),
+                          [&](const Camera* x) { return SameCamera(*x, p.camera); });
+    if (c == cameras.end()) c = cameras.insert(cameras.end(), &p.camera);
+    auto l = std::find_if(lights.begin(), lights.end(),
+                          [&](const Light* x) { return SameLight(*x, p.light); });
+    if (l == lights.end()) l = lights.insert(lights.end(), &p.light);
+    images.push_back({{"path", paths[i]},
+                      {"camera", c - cameras.begin()},
+                      {"light", l - lights.begin()},
+                      {"encoding", encoding}});
+  }
+  json cams = json::array(), ls = json::array();
+  for (const Camera* c : cameras) cams.push_back(CameraJson(*c));
+  for (const Light* l : lights) ls.push_back(LightJson(*l));
+  return {{"format", "digitize.calibration"},
+          {"version", 1},
+          {"units", "mm"},
+          {"cameras", cams},
+          {"lights", ls},
+          {"images", images}};
+}
+
+json OptionsJson(const PhotoSimOptions& o) {
+  return {{"cameras", o.cameras},
+          {"camera_arc_deg", o.camera_arc_deg},
+          {"camera_distance_mm", o.camera_distance_mm},
+          {"pixels_per_texel", o.pixels_per_texel},
+          {"view_margin", o.view_margin},
+          {"lights", o.lights},
+          {"light_min_elevation_deg", o.light_min_elevation_deg},
+          {"light_max_elevation_deg", o.light_max_elevation_deg},
+          {"light_distance_mm", o.light_distance_mm},
+          {"white_level", o.white_level},
+          {"held_out_lights", o.held_out_lights},
+          {"held_out_camera_deg", o.held_out_camera_deg},
+          {"noise_sigma", o.noise_sigma},
+          {"encoding", ToString(o.encoding)},
+          {"shadows", o.shadows},
+          {"frame_albedo", o.frame_albedo},
+          {"seed", o.seed}};
+}
+
+json MaterialsJson(const SyntheticPhotoSet& set) {
+  json list = json::array();
+  for (size_t i = 0; i < set.materials.size(); ++i) {
+    const PaintMaterial& m = set.materials[i];
+    json j = {{"index", i}, {"name", m.name}};
+    if (m.is_measured) {
+      json lobes = json::array();
+      for (const MeasuredLafortuneLobe& lobe : m.measured.lobes)
+        lobes.push_back({{"cxy", Vec(lobe.cxy)}, {"cz", Vec(lobe.cz)}, {"n", Vec(lobe.n)}});
+      j["model"] = "lafortune-measured";
+      j["measured_name"] = m.measured.name;
+      j["diffuse_albedo"] = Vec(m.measured.diffuse_albedo);
+      j["lobes"] = lobes;
+    } else {
+      const LafortuneParams& p = m.lafortune;
+      j["model"] = "lafortune-1";
+      j["rho_d"] = Vec(p.rho_d);
+      j["rho_s"] = Vec(p.rho_s);
+      j["cx"] = p.cx;
+      j["cy"] = p.cy;
+      j["cz"] = p.cz;
+      j["k"] = p.k;
+    }
+    list.push_back(j);
+  }
+  return {{"format", "digitize.synthetic_materials"},
+          {"version", kMaterialsFormatVersion},
+          {"units", "rho_d, rho_s: BRDF values (1/sr); diffuse_albedo: albedo (BRDF = albedo / pi)"},
+          {"models",
+           {{"lafortune-1",
+             "f = rho_d + rho_s max(0, cx vx lx + cy vy ly + cz vz lz)^k, tangent frame "
+             "(tangent_frame.h), cz = 1"},
+            {"lafortune-measured",
+             "f = diffuse_albedo / pi + sum_i max(0, cxy_i (vx lx + vy ly) + cz_i vz lz)^n_i"}}},
+          {"region_rule", "texel material = paint region % material count (material.png)"},
+          {"materials", list}};
+}
+
+std::string Numbered(const char* stem, size_t i, const char* ext) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%s%03zu.%s", stem, i, ext);
+  return buf;
+}
+
+// Interleaved samples written through OpenImageIO, atomically.
+Status WriteOiio(const fs::path& path, const char* format, const OIIO::ImageSpec& spec,
+                 const void* pixels) {
+  return WriteAtomically(path, [&](const fs::path& temp) -> Status {
+    auto file = OIIO::ImageOutput::create(format);
+    if (!file) return Error{path.string() + ": no " + format + " writer"};
+    if (!file->open(temp.string(), spec))
+      return Error{path.string() + ": cannot open for writing: " + file->geterror()};
+    const bool wrote = file->write_image(spec.format, pixels);
+    const bool closed = file->close();
+    if (!wrote || !closed) return Error{path.string() + ": write failed: " + file->geterror()};
+    return Status::Ok();
+  });
+}
+
+// The sRGB codes of linear values that SimulatePhotoSet took from the code tables: the OETF
+// maps each back onto its code exactly (neighbouring codes are >= 1e-6 apart in linear value,
+// float's rounding ~6e-8).
+template <class T>
+std::vector<T> SrgbCodes(const Grid<Vec3f>& rgb, int max_code) {
+  std::vector<T> codes(rgb.size() * 3);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, rgb.size(), 4096),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t i = r.begin(); i != r.end(); ++i) {
+                        for (int k = 0; k < 3; ++k) {
+                          const double x = std::clamp(double(rgb.data[i][k]), 0.0, 1.0);
+                          const double e = x <= 0.0031308 ? 12.92 * x
+                                                          : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
+                          codes[3 * i + k] = static_cast<T>(std::lround(e * max_code));
+                        }
+                      }
+                    });
+  return codes;
+}
+
+Status WritePhoto(const fs::path& path, const Photo& photo, PhotoEncoding encoding) {
+  const Grid<Vec3f>& rgb = photo.rgb;
+  if (encoding == PhotoEncoding::kLinearExr) {
+    return WriteFloatExr(path, rgb, {"R", "G", "B"}, {{"digitize:quantity", "linear radiance"}});
+  }
+  OIIO::ImageSpec spec(rgb.width, rgb.height, 3,
+                       encoding == PhotoEncoding::kSrgb8 ? OIIO::TypeDesc::UINT8
+                                                         : OIIO::TypeDesc::UINT16);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  if (encoding == PhotoEncoding::kSrgb8) {
+    const auto codes = SrgbCodes<uint8_t>(rgb, 255);
+    return WriteOiio(path, "png", spec, codes.data());
+  }
+  const auto codes = SrgbCodes<uint16_t>(rgb, 65535);
+  return WriteOiio(path, "png", spec, codes.data());
+}
+
+Status CreateDir(const fs::path& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Error{dir.string() + ": cannot create the folder: " + ec.message()};
+  return Status::Ok();
+}
+
+// Writes n files in parallel (TBB); returns the first error in file order.
+template <class Write>
+Status WriteAll(size_t n, Write write) {
+  std::vector<Status> status(n);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) status[i] = write(i);
+  });
+  for (const Status& s : status) {
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status WriteSyntheticPhotoSet(const fs::path& dir, const SyntheticPhotoSet& set) {
+  const PhotoEncoding encoding = set.options.encoding;
+  const bool exr = encoding == PhotoEncoding::kLinearExr;
+  for (const fs::path& d : {dir, dir / "images", dir / "held_out", dir / "truth"}) {
+    if (Status s = CreateDir(d); !s.ok()) return s;
+  }
+
+  // Fitting images.
+  std::vector<std::string> paths;
+  for (size_t i = 0; i < set.fit.photos.size(); ++i)
+    paths.push_back("images/" + Numbered("img_", i, exr ? "exr" : "png"));
+  if (Status s = WriteAll(set.fit.photos.size(),
+                          [&](size_t i) {
+                            return WritePhoto(dir / paths[i], set.fit.photos[i], encoding);
+                          });
+      !s.ok())
+    return s;
+
+  // Held-out renders and masks.
+  std::vector<std::string> held_paths, mask_paths;
+  for (size_t i = 0; i < set.held_out.photos.size(); ++i) {
+    held_paths.push_back(Numbered("img_", i, "exr"));
+    mask_paths.push_back(Numbered("mask_", i, "png"));
+  }
+  if (Status s = WriteAll(set.held_out.photos.size(),
+                          [&](size_t i) -> Status {
+                            if (Status w = WritePhoto(dir / "held_out" / held_paths[i],
+                                                      set.held_out.photos[i],
+                                                      PhotoEncoding::kLinearExr);
+                                !w.ok())
+                              return w;
+                            Grid<uint8_t> mask = set.held_out_mask[i];
+                            for (uint8_t& m : mask.data) m = m ? 255 : 0;
+                            return WritePng8(dir / "held_out" / mask_paths[i], mask);
+                          });
+      !s.ok())
+    return s;
+
+  // Truth on the painting's texel grid.
+  const ReflectanceMaps& t = set.truth;
+  const ImageMetadata meta = {{"digitize:frame", "canvas texel grid (row 0 = top)"},
+                              {"digitize:units", "1/sr"}};
+  if (Status s = WriteFloatExr(dir / "truth" / "rho_d.exr", t.rho_d, {"R", "G", "B"}, meta); !s.ok())
+    return s;
+  if (Status s = WriteFloatExr(dir / "truth" / "rho_s.exr", t.rho_s, {"R", "G", "B"}, meta); !s.ok())
+    return s;
+  {
+    OIIO::ImageSpec spec(t.lobe.width, t.lobe.height, 4, OIIO::TypeDesc::FLOAT);
+    spec.channelnames = {"cx", "cy", "cz", "k"};
+    spec.alpha_channel = -1;
+    spec.attribute("compression", "zip");
+    spec.attribute("digitize:frame", "canvas texel grid (row 0 = top)");
+    spec.attribute("digitize:quantity", "Lafortune lobe (cx, cy, cz = 1, k), tangent frame");
+    if (Status s = WriteOiio(dir / "truth" / "lobe.exr", "openexr", spec, t.lobe.data.data());
+        !s.ok())
+      return s;
+  }
+  if (Status s = WritePng8(dir / "truth" / "material.png", set.material_index); !s.ok()) return s;
+  if (Status s = WriteTextFile(dir / "truth" / "materials.json", MaterialsJson(set).dump(2) + "\n");
+      !s.ok())
+    return s;
+
+  // Calibrations last: their presence says the images beside them are complete.
+  json held = CalibrationJson(set.held_out, held_paths, "linear");
+  held["masks"] = mask_paths;
+  held["comment"] =
+      "held-out renders: noise-free linear radiance; masks: 255 where the pixel shows a canvas "
+      "texel that no frame shadow darkens";
+  if (!set.held_out.photos.empty()) {
+    if (Status s = WriteTextFile(dir / "held_out" / "calib.json", held.dump(2) + "\n"); !s.ok())
+      return s;
+  }
+  json fit = CalibrationJson(set.fit, paths, exr ? "linear" : "srgb");
+  fit["generator"] = {{"name", "digitize synth (SimulatePhotoSet)"},
+                      {"options", OptionsJson(set.options)},
+                      {"canvas_from_scan", TransformJson(set.canvas_from_scan)},
+                      {"held_out", set.held_out.photos.empty() ? "" : "held_out/calib.json"},
+                      {"truth", "truth/"}};
+  return WriteTextFile(dir / "calib.json", fit.dump(2) + "\n");
+}
+
+}  // namespace digitize::synth
