@@ -35,10 +35,51 @@ size_t RemoveDarkOutliers(std::span<const BrdfSample> in, const LafortuneParams&
   for (const BrdfSample& s : in) {
     const double floor = s.irradiance.cwiseProduct(params.rho_d).sum();
     const double seen = s.radiance.sum();
-    if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) continue;
+    if (seen < o.dark_outlier_fit_ratio * floor && floor - seen > min_gap) continue;
     out.push_back(s);
   }
   return in.size() - out.size();
+}
+
+// Before any fit: the diffuse floor of a texel is estimated as the median apparent reflectance
+// q = sum_c radiance / sum_c E over its samples (the lobe only raises q, and a shadow drops it to
+// ~0, so the median sits at or a little above rho_d whenever most samples are lit). Samples far
+// below that floor are removed from `samples` in place (texel_begin updated). Returns the count.
+size_t PrefilterDarkOutliers(BrdfSamples& samples, const ReflectanceFitOptions& o,
+                             std::vector<size_t>& removed) {
+  const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
+  std::vector<BrdfSample>& all = samples.samples;
+  std::vector<size_t>& begin = samples.texel_begin;
+  std::vector<double> q;
+  size_t write = 0, total = 0;
+  for (size_t t = 0; t + 1 < begin.size(); ++t) {
+    const size_t b = begin[t], e = begin[t + 1];
+    q.clear();
+    for (size_t i = b; i < e; ++i) {
+      const double irradiance = all[i].irradiance.sum();
+      if (irradiance > 0) q.push_back(all[i].radiance.sum() / irradiance);
+    }
+    double floor_q = 0;
+    if (q.size() >= 3) {
+      const auto mid = q.begin() + static_cast<std::ptrdiff_t>(q.size() / 2);
+      std::nth_element(q.begin(), mid, q.end());
+      floor_q = *mid;
+    }
+    begin[t] = write;
+    for (size_t i = b; i < e; ++i) {
+      const double floor = floor_q * all[i].irradiance.sum();
+      const double seen = all[i].radiance.sum();
+      if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) {
+        ++removed[t];
+        ++total;
+        continue;
+      }
+      all[write++] = all[i];
+    }
+  }
+  begin.back() = write;
+  all.resize(write);
+  return total;
 }
 
 }  // namespace
@@ -53,6 +94,8 @@ Status ReflectanceFitOptions::Validate() const {
                  FormatNumber(dark_outlier_ratio)};
   if (!(std::isfinite(dark_outlier_sigmas) && dark_outlier_sigmas >= 0))
     return Error{"dark_outlier_sigmas must be >= 0, got " + FormatNumber(dark_outlier_sigmas)};
+  if (!(std::isfinite(dark_outlier_fit_ratio) && dark_outlier_fit_ratio >= 0 && dark_outlier_fit_ratio < 1))
+    return Error{"dark_outlier_fit_ratio must be in [0, 1), got " + FormatNumber(dark_outlier_fit_ratio)};
   if (dark_outlier_rounds < 0 || dark_outlier_rounds > 10)
     return Error{"dark_outlier_rounds must be in [0, 10], got " +
                  std::to_string(dark_outlier_rounds)};
@@ -116,11 +159,12 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
     report.seconds_samples += Since(t0);
 
     t0 = Clock::now();
+    std::vector<size_t> removed(part.size(), 0);
+    if (options.dark_outlier_ratio > 0) PrefilterDarkOutliers(samples, options, removed);
     BrdfFitOptions fit_options = options.fit;
     auto fitted = FitBrdf(samples, fit_options);
     if (!fitted.ok()) return fitted.error();  // options were validated: not expected
     BrdfFitResult& fit = *fitted;
-    std::vector<size_t> removed(part.size(), 0);
     if (options.dark_outlier_ratio > 0 && options.dark_outlier_rounds > 0) {
       tbb::parallel_for(tbb::blocked_range<size_t>(0, part.size(), 256),
                         [&](const tbb::blocked_range<size_t>& r) {
@@ -167,7 +211,6 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
     ReportProgress(progress, "fit",
                    static_cast<double>(begin + part.size()) / static_cast<double>(texels.size()));
   }
-  summary.samples_used -= std::min(summary.samples_used, report.dark_outliers);
   summary.mean_rms_error = summary.texels ? rms_sum / static_cast<double>(summary.texels) : 0.0;
   summary.mean_iterations = lobe_texels ? iteration_sum / static_cast<double>(lobe_texels) : 0.0;
   summary.seconds = report.seconds_fit;

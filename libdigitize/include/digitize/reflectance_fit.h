@@ -9,12 +9,17 @@
 // photos x 48 bytes whatever the canvas size.
 //
 // Unmodelled shadows. Shadows cast by anything but the relief (the frame under a grazing light, a
-// hand, a stand) are invisible to the ray tests, and a dark sample pulls the whole fit down. The
-// model bounds radiance from below by the diffuse term (the lobe is >= 0): after a first fit, a
-// sample with, summed over channels, radiance < dark_outlier_ratio x E rho_d AND (E rho_d -
-// radiance) > dark_outlier_sigmas x noise_sigma x sqrt(3) is removed as shadowed, and the texel is
-// fitted again (at most dark_outlier_rounds times). Counted in the report.
-//
+// hand, a stand) are invisible to the ray tests, and dark samples pull the whole fit down. The
+// model bounds radiance from below by the diffuse term (the lobe is >= 0), so, per texel:
+//   1. before fitting, the diffuse floor is estimated as the median apparent reflectance
+//      q = sum_c radiance / sum_c E of its samples (a lobe only raises q, a shadow drops it to ~0);
+//      a sample below dark_outlier_ratio x that floor, by more than dark_outlier_sigmas x
+//      noise_sigma x sqrt(3), is removed;
+//   2. after the fit, the same test against the fitted E rho_d with dark_outlier_fit_ratio (a
+//      lit sample cannot be below it, so this ratio can be close to 1 and also catches samples
+//      that straddle a shadow edge); removed samples trigger a refit
+//      (at most dark_outlier_rounds times).
+// Counted in the report (dark_outliers, texels_refitted = texels that lost samples).
 // Texels: kOutside texels are not fitted (zeros, status kTooFewSamples, like texels with no
 // usable sample); everything else is (kUnfilled texels too: their heights are inpainted, their
 // normals smooth, and their colour is still measured).
@@ -37,7 +42,10 @@ struct ReflectanceFitOptions {
   SampleOptions samples;
   BrdfFitOptions fit;
   int tile_texels = 32768;          // texels gathered and fitted at a time (memory bound)
-  double dark_outlier_ratio = 0.5;  // <= 0 disables the unmodelled-shadow removal (see above)
+  double dark_outlier_ratio = 0.5;  // before the fit, vs the median floor; <= 0 disables the
+                                    // unmodelled-shadow removal (see above)
+  double dark_outlier_fit_ratio = 0.7;  // after the fit, vs the fitted diffuse floor (a lit
+                                         // sample is never below it but for noise)
   double dark_outlier_sigmas = 6.0;
   int dark_outlier_rounds = 2;
   Status Validate() const;
@@ -47,7 +55,7 @@ struct ReflectanceFitReport {
   SampleStats samples;
   BrdfFitSummary fit;           // over the fitted texels; fit.seconds = wall time fitting
   size_t dark_outliers = 0;     // samples removed as unmodelled shadows
-  size_t texels_refitted = 0;   // texels fitted again after removing them
+  size_t texels_refitted = 0;   // texels that lost samples to it
   size_t texels_outside = 0;    // kOutside texels, not fitted
   double seconds_tracer = 0;    // building the ray-tracing structure
   double seconds_samples = 0;   // gathering samples, rays included (wall)
