@@ -48,7 +48,7 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
       if (status == TexelFitStatus::kDiffuseOnly) ++diffuse[m];
       if (truth.materials[m].is_measured) continue;
       const LafortuneParams f = fitted.At(x, y), g = truth.truth.At(tx, ty);
-      rho_d[m].push_back((f.rho_d - g.rho_d).norm() / std::max(1e-6f, g.rho_d.norm()));
+      rho_d[m].push_back((f.rho_d - g.rho_d).norm() / std::max(0.01f, g.rho_d.norm()));
       albedo[m].push_back(std::abs(SpecularAlbedo(f.rho_s, f.k) - SpecularAlbedo(g.rho_s, g.k)));
       if (g.rho_s.maxCoeff() > 0) {
         logk[m].push_back(std::abs(std::log10(std::max(f.k, 1e-3f) / g.k)));

@@ -24,7 +24,8 @@ struct RegionReflectanceError {
   std::string name;
   bool is_measured = false;     // errors below are NaN: no one-lobe truth
   size_t texels = 0;            // compared
-  double rho_d_rel_median = 0;  // median over texels of |rho_d - true| / |true| (RGB norms)
+  double rho_d_rel_median = 0;  // median over texels of |rho_d - true| / max(|true|, 0.01 1/sr)
+                                // (RGB norms; the floor keeps black paint meaningful)
   double spec_albedo_abs_median = 0;  // median |A - A_true|, A = mean_c rho_s,c 2 pi / (k + 2)
   double log10_k_abs_median = 0;      // median |log10 k / k_true|, texels with a true lobe only
   double lobe_abs_median = 0;         // median max(|cx - true|, |cy - true|), same texels
