@@ -8,7 +8,8 @@
 //     on the full canvas would take minutes), with the held-out PSNR of each on that crop.
 // Writes docs/bench_fit.csv (one row per configuration) for bench/plot_fit.gp.
 //
-//   fit_bench [--long-side=1155] [--lights=64] [--crop=128] [--csv-dir=docs] [--keep=DIR]
+//   fit_bench [--long-side=1155] [--lights=64] [--pixels-per-texel=1.13] [--crop=128]
+//             [--csv-dir=docs] [--keep=DIR]
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -99,7 +100,9 @@ int main(int argc, char** argv) {
   const int long_side = std::stoi(Arg(argc, argv, "long-side", "1155"));
   const int lights = std::stoi(Arg(argc, argv, "lights", "64"));
   const int crop_n = std::stoi(Arg(argc, argv, "crop", "128"));
+  const double ppt = std::stod(Arg(argc, argv, "pixels-per-texel", "1.13"));
   const std::filesystem::path csv_dir = Arg(argc, argv, "csv-dir", "");
+  const std::string csv_name = Arg(argc, argv, "csv-name", "bench_fit.csv");
   const std::string keep = Arg(argc, argv, "keep", "");
 
   synth::PaintingOptions po;
@@ -108,6 +111,7 @@ int main(int argc, char** argv) {
   const synth::Scene scene(painting, synth::FrameOptions{});
   synth::PhotoSimOptions so;
   so.lights = lights;
+  so.pixels_per_texel = ppt;
   auto t0 = Clock::now();
   const synth::SyntheticPhotoSet truth = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
   const double seconds_render = Since(t0);
@@ -119,7 +123,8 @@ int main(int argc, char** argv) {
 
   // The photos as a user has them: files on disk, decoded by the fit.
   const std::filesystem::path dir =
-      keep.empty() ? std::filesystem::temp_directory_path() / "digitize_fit_bench" : keep;
+      keep.empty() ? std::filesystem::temp_directory_path() / "digitize_fit_bench"
+                   : std::filesystem::path(keep);
   std::filesystem::remove_all(dir);
   if (Status s = synth::WriteSyntheticPhotoSet(dir, truth); !s.ok()) {
     std::fprintf(stderr, "%s\n", s.message().c_str());
@@ -198,7 +203,7 @@ int main(int argc, char** argv) {
   std::printf("whole fit: %s\n", rows[0].brief.c_str());
 
   if (!csv_dir.empty()) {
-    std::ofstream csv(csv_dir / "bench_fit.csv");
+    std::ofstream csv(csv_dir / csv_name);
     csv << "config,texels,photos,samples_kept,rays,rays_skipped,rays_traced,seconds_load,"
            "seconds_samples,seconds_fit,seconds_write,seconds_total,us_per_texel_fit,psnr_db,rmse\n";
     for (const Row& r : rows)
@@ -207,7 +212,7 @@ int main(int argc, char** argv) {
           << r.seconds_samples << "," << r.seconds_fit << "," << r.seconds_write << ","
           << r.seconds_total << "," << r.us_per_texel_fit << "," << r.psnr_db << "," << r.rmse
           << "\n";
-    std::printf("wrote %s\n", (csv_dir / "bench_fit.csv").c_str());
+    std::printf("wrote %s\n", (csv_dir / csv_name).c_str());
   }
   if (keep.empty()) std::filesystem::remove_all(dir);
   return 0;

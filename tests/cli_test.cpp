@@ -4,6 +4,8 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -53,7 +55,7 @@ class CliTest : public ::testing::Test {
 TEST_F(CliTest, HelpForEveryCommand) {
   Output top = RunCli("--help");
   EXPECT_EQ(top.exit_code, 0);
-  for (const char* cmd : {"synth", "preprocess", "demo"}) {
+  for (const char* cmd : {"synth", "preprocess", "fit", "demo"}) {
     EXPECT_NE(top.text.find(cmd), std::string::npos) << cmd;
     Output sub = RunCli(std::string(cmd) + " --help");
     EXPECT_EQ(sub.exit_code, 0) << cmd;
@@ -152,6 +154,86 @@ TEST_F(CliTest, DemoPrintsAccuracyAndWritesOutputs) {
   EXPECT_NE(out.text.find("RMSE"), std::string::npos) << out.text;
   EXPECT_TRUE(fs::exists(Path("demo/canvas/height.exr")));
   EXPECT_TRUE(fs::exists(Path("demo/scan/scan.exr")));
+  // Issue 3: the demo fits the photos on the preprocessed canvas and judges held-out relighting.
+  EXPECT_NE(out.text.find("held-out PSNR"), std::string::npos) << out.text;
+  for (const char* f : {"fit/rho_d.exr", "fit/rho_s.exr", "fit/lobe.exr", "fit/fit_error.exr",
+                        "fit/fit_status.png", "fit/report.json", "photos/calib.json"})
+    EXPECT_TRUE(fs::exists(Path(std::string("demo/") + f))) << f;
+}
+
+// synth --photos -> preprocess -> fit, as a user with files runs it; then the hostile inputs.
+TEST_F(CliTest, FitFromFilesAndItsErrors) {
+  Output synth = RunCli("synth --out " + Path("s") +
+                        " --resolution 160 --scan-size 200 200 --photos --lights 24 --seed 5");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  ASSERT_TRUE(fs::exists(Path("s/photos/calib.json")));
+  Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c"));
+  ASSERT_EQ(pre.exit_code, 0) << pre.text;
+  const std::string base = "fit --canvas " + Path("c") + " --photos ";
+  Output fit = RunCli(base + Path("s/photos/calib.json") + " --out " + Path("f") +
+                      " --held-out " + Path("s/photos/held_out/calib.json"));
+  ASSERT_EQ(fit.exit_code, 0) << fit.text;
+  for (const char* what : {"samples:", "held-out PSNR", "converged", "outputs in"})
+    EXPECT_NE(fit.text.find(what), std::string::npos) << what << "\n" << fit.text;
+  for (const char* f : {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr", "fit_status.png",
+                        "report.json"})
+    EXPECT_TRUE(fs::exists(Path(std::string("f/") + f))) << f;
+  {  // lobe.exr: 4 float channels named cx, cy, cz, k, all finite
+    auto in = OIIO::ImageInput::open(Path("f/lobe.exr"));
+    ASSERT_TRUE(in);
+    const OIIO::ImageSpec& spec = in->spec();
+    ASSERT_EQ(spec.nchannels, 4);
+    EXPECT_EQ(spec.channelnames[3], "k");
+    std::vector<float> px(static_cast<size_t>(spec.width) * spec.height * 4);
+    ASSERT_TRUE(in->read_image(0, 0, 0, 4, OIIO::TypeDesc::FLOAT, px.data()));
+    for (float v : px) ASSERT_TRUE(std::isfinite(v));
+  }
+
+  // A calibration without its canvas is refused (only RTI captures fit on a flat canvas).
+  Output no_canvas = RunCli("fit --photos " + Path("s/photos/calib.json") + " --out " + Path("g"));
+  EXPECT_EQ(no_canvas.exit_code, 1);
+  EXPECT_NE(no_canvas.text.find("--canvas"), std::string::npos) << no_canvas.text;
+
+  // A missing image: the error names it; nothing is written.
+  fs::copy(Path("s/photos"), Path("p2"), fs::copy_options::recursive);
+  fs::path victim;
+  for (const auto& e : fs::directory_iterator(Path("p2/images"))) victim = e.path();
+  ASSERT_FALSE(victim.empty());
+  fs::remove(victim);
+  Output missing = RunCli(base + Path("p2/calib.json") + " --out " + Path("g"));
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.text.find(victim.filename().string()), std::string::npos) << missing.text;
+  EXPECT_FALSE(fs::exists(Path("g")));
+
+  // An image of the wrong size: named.
+  fs::remove_all(Path("p2"));
+  fs::copy(Path("s/photos"), Path("p2"), fs::copy_options::recursive);
+  {
+    std::vector<unsigned char> tiny(8 * 8 * 3, 100);
+    auto out = OIIO::ImageOutput::create(victim.string());
+    ASSERT_TRUE(out);
+    ASSERT_TRUE(out->open((Path("p2/images") + "/" + victim.filename().string()),
+                          OIIO::ImageSpec(8, 8, 3, OIIO::TypeDesc::UINT8)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, tiny.data()));
+    out->close();
+  }
+  Output wrong = RunCli(base + Path("p2/calib.json") + " --out " + Path("g"));
+  EXPECT_EQ(wrong.exit_code, 1);
+  EXPECT_NE(wrong.text.find(victim.filename().string()), std::string::npos) << wrong.text;
+
+  // A calibration whose rotation is not a rotation (a scaled row): the error names the entry.
+  {
+    std::ifstream in(Path("s/photos/calib.json"));
+    nlohmann::json doc = nlohmann::json::parse(in);
+    ASSERT_TRUE(doc.contains("cameras"));
+    doc["cameras"][0]["camera_from_scan"]["rotation"][0][0] = 2.0;
+    std::ofstream(Path("s/photos/edited.json")) << doc.dump(1);
+  }
+  Output bad_rotation = RunCli(base + Path("s/photos/edited.json") + " --out " + Path("g"));
+  EXPECT_EQ(bad_rotation.exit_code, 1);
+  EXPECT_NE(bad_rotation.text.find("not a rotation"), std::string::npos) << bad_rotation.text;
+  EXPECT_NE(bad_rotation.text.find("edited.json"), std::string::npos) << bad_rotation.text;
+  EXPECT_FALSE(fs::exists(Path("g")));
 }
 
 }  // namespace
