@@ -75,8 +75,8 @@ struct Rays {
   size_t size() const { return origins.size(); }
 };
 
-std::vector<uint8_t> Occluded(const HeightFieldTracer& tracer, const Rays& rays,
-                              bool skip = true, TraceStats* stats = nullptr) {
+std::vector<uint8_t> Occluded(const HeightFieldTracer& tracer, const Rays& rays, bool skip = true,
+                              TraceStats* stats = nullptr) {
   std::vector<uint8_t> blocked(rays.size(), 7);
   TraceOptions options;
   options.skip_unblockable = skip;
@@ -159,13 +159,13 @@ TEST(HeightFieldTracer, BoxBlocksRaysTowardsItOnly) {
   Rays rays;
   // East (+X) towards the box: at elevation e the ray is at height 2 tan(e) mm over the near face
   // (2.0 to 2.8 mm away), blocked while that is below 2 mm: e < 45 deg at the near face.
-  rays.Add(o, Direction(0, Deg(20)));   // 0: towards, low -> blocked
-  rays.Add(o, Direction(0, Deg(40)));   // 1: towards, 2 tan 40 = 1.68 < 2 -> blocked
-  rays.Add(o, Direction(0, Deg(60)));   // 2: towards, over the box -> free
-  rays.Add(o, Direction(std::numbers::pi, Deg(20)));        // 3: away (west) -> free
-  rays.Add(o, Direction(std::numbers::pi / 2, Deg(5)));     // 4: north, nothing there -> free
-  rays.Add(o, Direction(0, Deg(20)), 1.5f);                 // 5: towards, tfar short -> free
-  rays.Add(o, Direction(0, Deg(20)), 2.5f);                 // 6: towards, reaches the face
+  rays.Add(o, Direction(0, Deg(20)));                 // 0: towards, low -> blocked
+  rays.Add(o, Direction(0, Deg(40)));                 // 1: towards, 2 tan 40 = 1.68 < 2 -> blocked
+  rays.Add(o, Direction(0, Deg(60)));                 // 2: towards, over the box -> free
+  rays.Add(o, Direction(std::numbers::pi, Deg(20)));  // 3: away (west) -> free
+  rays.Add(o, Direction(std::numbers::pi / 2, Deg(5)));  // 4: north, nothing there -> free
+  rays.Add(o, Direction(0, Deg(20)), 1.5f);              // 5: towards, tfar short -> free
+  rays.Add(o, Direction(0, Deg(20)), 2.5f);              // 6: towards, reaches the face
   // From the box's top: every upward ray is free.
   rays.Add(SurfacePoint(f, 43, 31), Direction(std::numbers::pi, Deg(3)));  // 7
   const std::vector<uint8_t> expected = {1, 1, 0, 0, 0, 0, 1, 0};
@@ -193,7 +193,8 @@ TEST(HeightFieldTracer, ShadowOfAStepHasTheAnalyticLength) {
     const double e = std::atan(kWall / length_mm);
     Rays rays;
     for (int y = 0; y < f.height(); ++y)
-      for (int x = 64; x < f.width(); ++x) rays.Add(SurfacePoint(f, x, y), Direction(std::numbers::pi, e));
+      for (int x = 64; x < f.width(); ++x)
+        rays.Add(SurfacePoint(f, x, y), Direction(std::numbers::pi, e));
     for (bool skip : {true, false}) {
       const std::vector<uint8_t> blocked = Occluded(t, rays, skip);
       size_t i = 0, wrong = 0;
@@ -250,8 +251,8 @@ TEST(HeightFieldTracer, SkippingChangesNothingOnARoughField) {
   EXPECT_GT(on.blocked, rays.size() / 50) << "the field must block a fair share";
   // White noise puts a higher neighbour in front of most origins: few rays can be proven free.
   EXPECT_GT(on.skipped, rays.size() / 20) << "the pyramid must prove some rays free";
-  std::printf("[ rough field ] %zu rays: %zu skipped (%.1f %%), %zu traced, %zu blocked\n",
-              on.rays, on.skipped, 100.0 * on.skipped / on.rays, on.traced, on.blocked);
+  std::printf("[ rough field ] %zu rays: %zu skipped (%.1f %%), %zu traced, %zu blocked\n", on.rays,
+              on.skipped, 100.0 * on.skipped / on.rays, on.traced, on.blocked);
 }
 
 TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {
@@ -275,8 +276,8 @@ TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {
         const size_t n = std::min(kSpan, rays.size() - first);
         t.Occluded(std::span(rays.origins).subspan(first, n),
                    std::span(rays.directions).subspan(first, n),
-                   std::span(rays.tfar).subspan(first, n), std::span(blocked).subspan(first, n),
-                   {}, &stats[k]);
+                   std::span(rays.tfar).subspan(first, n), std::span(blocked).subspan(first, n), {},
+                   &stats[k]);
       }
     });
   }
@@ -360,9 +361,8 @@ TEST(HeightFieldTracer, ObliqueRaysHitATiltedPlaneWhereTheAlgebraSays) {
 }
 
 TEST(HeightFieldTracer, LongSpansRunInParallelWithTheSameAnswer) {
-  const HeightField f = MakeField(100, 100, 0.1, [](int x, int y) {
-    return 0.4f * std::sin(0.3f * x + 0.1f * y);
-  });
+  const HeightField f =
+      MakeField(100, 100, 0.1, [](int x, int y) { return 0.4f * std::sin(0.3f * x + 0.1f * y); });
   const HeightFieldTracer t = BuildOrDie(f);
   const Rays rays = RandomUpwardRays(f, 30000, 2.0, 8);
   std::vector<uint8_t> one(rays.size()), two(rays.size()), all(rays.size());
@@ -497,8 +497,8 @@ TEST(HeightFieldTracer, DISABLED_Timing2048) {
     random_rays.Add(SurfacePoint(field, ux(rng), uy(rng)), Direction(az(rng), el(rng)),
                     i % 2 ? kInf : 500.0f);
 
-  for (const auto& [name, rays] : {std::pair<const char*, const Rays*>{"dome", &dome_rays},
-                                   {"random", &random_rays}}) {
+  for (const auto& [name, rays] :
+       {std::pair<const char*, const Rays*>{"dome", &dome_rays}, {"random", &random_rays}}) {
     const size_t n = rays->size();
     std::vector<uint8_t> blocked(n);
     for (int threads : {1, 2}) {
@@ -507,34 +507,43 @@ TEST(HeightFieldTracer, DISABLED_Timing2048) {
         o.num_threads = threads;
         o.skip_unblockable = skip;
         TraceStats s;
-        const Clock::time_point t0 = Clock::now();
-        tracer.Occluded(rays->origins, rays->directions, rays->tfar, blocked, o, &s);
-        const double sec = seconds(t0);
-        std::printf("[ timing ] %-6s %d thread(s), skip %-3s: %6.2f Mrays/s, skipped %.1f %%, "
-                    "blocked %.1f %%\n",
-                    name, threads, skip ? "on" : "off", n / sec / 1e6, 100.0 * s.skipped / n,
-                    100.0 * s.blocked / n);
+        double sec = kInf;  // best of 3: the machine is shared
+        for (int rep = 0; rep < 3; ++rep) {
+          s = {};
+          const Clock::time_point t0 = Clock::now();
+          tracer.Occluded(rays->origins, rays->directions, rays->tfar, blocked, o, &s);
+          sec = std::min(sec, seconds(t0));
+        }
+        std::printf(
+            "[ timing ] %-6s %d thread(s), skip %-3s: %6.2f Mrays/s, skipped %.1f %%, "
+            "blocked %.1f %%\n",
+            name, threads, skip ? "on" : "off", n / sec / 1e6, 100.0 * s.skipped / n,
+            100.0 * s.blocked / n);
       }
     }
     // One texel's lights per call from 2 threads: the gatherer's pattern, call overhead included.
     for (bool skip : {false, true}) {
       TraceOptions o;
       o.skip_unblockable = skip;
-      const Clock::time_point t0 = Clock::now();
-      std::vector<std::thread> threads;
-      for (size_t k = 0; k < 2; ++k)
-        threads.emplace_back([&, k] {
-          for (size_t first = k * kLights; first < n; first += 2 * kLights) {
-            const size_t m = std::min(kLights, n - first);
-            tracer.Occluded(std::span(rays->origins).subspan(first, m),
-                            std::span(rays->directions).subspan(first, m),
-                            std::span(rays->tfar).subspan(first, m),
-                            std::span(blocked).subspan(first, m), o);
-          }
-        });
-      for (auto& th : threads) th.join();
+      double sec = kInf;
+      for (int rep = 0; rep < 3; ++rep) {
+        const Clock::time_point t0 = Clock::now();
+        std::vector<std::thread> threads;
+        for (size_t k = 0; k < 2; ++k)
+          threads.emplace_back([&, k] {
+            for (size_t first = k * kLights; first < n; first += 2 * kLights) {
+              const size_t m = std::min(kLights, n - first);
+              tracer.Occluded(std::span(rays->origins).subspan(first, m),
+                              std::span(rays->directions).subspan(first, m),
+                              std::span(rays->tfar).subspan(first, m),
+                              std::span(blocked).subspan(first, m), o);
+            }
+          });
+        for (auto& th : threads) th.join();
+        sec = std::min(sec, seconds(t0));
+      }
       std::printf("[ timing ] %-6s 2 threads, spans of %zu, skip %-3s: %6.2f Mrays/s\n", name,
-                  kLights, skip ? "on" : "off", n / seconds(t0) / 1e6);
+                  kLights, skip ? "on" : "off", n / sec / 1e6);
     }
   }
 }

@@ -110,9 +110,9 @@ TEST(RenderRelit, MirrorLobeSeenFromAbove) {
   p.rho_s = Vec3f(2.0f, 1.0f, 0.5f);
   p.k = 7.0f;
   const double e = Deg(62);
-  const RelitImage img = RenderRelit(tracer, canvas, Up(12, 10), Uniform(12, 10, p),
-                                     RigidTransform{}, OrthoAbove(canvas),
-                                     Directional(Deg(10), e, Vec3f::Ones()));
+  const RelitImage img =
+      RenderRelit(tracer, canvas, Up(12, 10), Uniform(12, 10, p), RigidTransform{},
+                  OrthoAbove(canvas), Directional(Deg(10), e, Vec3f::Ones()));
   const double s = std::sin(e);
   const Vec3d want = (p.rho_d.cast<double>() + p.rho_s.cast<double>() * std::pow(s, 7.0)) * s;
   for (int v = 0; v < 10; ++v)
@@ -163,9 +163,8 @@ TEST(RenderRelit, PinholeCameraSeesWhereItsRaysLand) {
   light.position_mm = Vec3d(20.0, 4.0, 15.0);
   light.intensity = Vec3f(1000.0f, 1000.0f, 1000.0f);
   const Vec3f rho(0.25f, 0.25f, 0.25f);
-  const RelitImage img = RenderRelit(tracer, canvas, Up(100, 80),
-                                     Uniform(100, 80, Lambertian(rho)), RigidTransform{}, cam,
-                                     light);
+  const RelitImage img = RenderRelit(tracer, canvas, Up(100, 80), Uniform(100, 80, Lambertian(rho)),
+                                     RigidTransform{}, cam, light);
   for (int v = 0; v < cam.height; v += 7)
     for (int u = 0; u < cam.width; u += 9) {
       const Vec3d p(centre.x() + (u - cam.cx) * centre.z() / cam.fx,
@@ -254,10 +253,9 @@ TEST(RenderRelit, MissesAndOutsideTexelsAreMaskedBlack) {
   canvas.state(3, 4) = TexelState::kOutside;
   const HeightFieldTracer tracer = Tracer(canvas);
   constexpr int kMargin = 5;  // pixels beyond the canvas on every side
-  const RelitImage img = RenderRelit(tracer, canvas, Up(20, 16),
-                                     Uniform(20, 16, Lambertian(Vec3f(0.3f, 0.3f, 0.3f))),
-                                     RigidTransform{}, OrthoAbove(canvas, kMargin),
-                                     Directional(0, Deg(60), Vec3f::Ones()));
+  const RelitImage img = RenderRelit(
+      tracer, canvas, Up(20, 16), Uniform(20, 16, Lambertian(Vec3f(0.3f, 0.3f, 0.3f))),
+      RigidTransform{}, OrthoAbove(canvas, kMargin), Directional(0, Deg(60), Vec3f::Ones()));
   size_t seen = 0;
   for (int v = 0; v < img.mask.height; ++v)
     for (int u = 0; u < img.mask.width; ++u) {
@@ -276,9 +274,9 @@ TEST(RenderRelit, ZeroMapsAndBacklightRenderBlackNotNaN) {
   const HeightField canvas = FlatCanvas(8, 8, 1.0);
   const HeightFieldTracer tracer = Tracer(canvas);
   // Light below the canvas plane: n.l < 0 everywhere.
-  const RelitImage below = RenderRelit(tracer, canvas, Up(8, 8),
-                                       Uniform(8, 8, Lambertian(Vec3f::Ones())), RigidTransform{},
-                                       OrthoAbove(canvas), Directional(0, Deg(-20), Vec3f::Ones()));
+  const RelitImage below =
+      RenderRelit(tracer, canvas, Up(8, 8), Uniform(8, 8, Lambertian(Vec3f::Ones())),
+                  RigidTransform{}, OrthoAbove(canvas), Directional(0, Deg(-20), Vec3f::Ones()));
   const RelitImage zeros =
       RenderRelit(tracer, canvas, Up(8, 8), ReflectanceMaps::Zeros(8, 8), RigidTransform{},
                   OrthoAbove(canvas), Directional(0, Deg(50), Vec3f::Ones()));
@@ -303,7 +301,8 @@ TEST(RenderRelit, CanvasFromScanMovesCameraAndLightTogether) {
   const RelitImage ref =
       RenderRelit(tracer, canvas, Up(24, 18), maps, RigidTransform{}, cam, light);
   RigidTransform canvas_from_scan;
-  canvas_from_scan.rotation = Eigen::AngleAxisd(0.4, Vec3d(1, 2, 3).normalized()).toRotationMatrix();
+  canvas_from_scan.rotation =
+      Eigen::AngleAxisd(0.4, Vec3d(1, 2, 3).normalized()).toRotationMatrix();
   canvas_from_scan.translation = Vec3d(-30.0, 12.0, 250.0);
   const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
   Camera cam2 = cam;
@@ -322,15 +321,15 @@ TEST(RenderRelit, SizeMismatchIsAnInvariantError) {
   const HeightFieldTracer tracer = Tracer(canvas);
   const Camera cam = OrthoAbove(canvas);
   const Light light = Directional(0, 1, Vec3f::Ones());
-  EXPECT_THROW(RenderRelit(tracer, canvas, Up(7, 8), ReflectanceMaps::Zeros(8, 8),
-                           RigidTransform{}, cam, light),
+  EXPECT_THROW(RenderRelit(tracer, canvas, Up(7, 8), ReflectanceMaps::Zeros(8, 8), RigidTransform{},
+                           cam, light),
                InvariantError);
-  EXPECT_THROW(RenderRelit(tracer, canvas, Up(8, 8), ReflectanceMaps::Zeros(8, 9),
-                           RigidTransform{}, cam, light),
+  EXPECT_THROW(RenderRelit(tracer, canvas, Up(8, 8), ReflectanceMaps::Zeros(8, 9), RigidTransform{},
+                           cam, light),
                InvariantError);
   const HeightField other = FlatCanvas(9, 8, 1.0);
-  EXPECT_THROW(RenderRelit(tracer, other, Up(9, 8), ReflectanceMaps::Zeros(9, 8),
-                           RigidTransform{}, cam, light),
+  EXPECT_THROW(RenderRelit(tracer, other, Up(9, 8), ReflectanceMaps::Zeros(9, 8), RigidTransform{},
+                           cam, light),
                InvariantError);
   RelightOptions bad;
   bad.num_threads = -2;
@@ -356,7 +355,7 @@ TEST(CompareImages, KnownOffsetGivesKnownPsnr) {
   for (auto& c : test.data) c += Vec3f::Constant(kDelta);
   Grid<uint8_t> mask(6, 5, 1);
   mask(0, 0) = 0;
-  test(0, 0) = Vec3f(9.0f, 9.0f, 9.0f);  // masked out: must not count
+  test(0, 0) = Vec3f(9.0f, 9.0f, 9.0f);                      // masked out: must not count
   test(1, 0).x() = std::numeric_limits<float>::quiet_NaN();  // non-finite: skipped
   const ImageComparison c = CompareImages(test, ref, mask, 2.0);
   EXPECT_EQ(c.pixels, 28u);

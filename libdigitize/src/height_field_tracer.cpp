@@ -32,7 +32,8 @@ constexpr int kGridCells = 256;
 // Rays per rtcOccluded1M / rtcIntersect1M call: amortises the call, fits on the stack (12 KiB).
 constexpr size_t kRayBatch = 256;
 // Spans up to this many rays run on the calling thread: the sample gatherer calls Occluded from
-// many threads with spans of a few hundred rays, where spawning tasks would cost more than it saves.
+// many threads with spans of a few hundred rays, where spawning tasks would cost more than it
+// saves.
 constexpr size_t kInlineRays = 4 * kRayBatch;
 // Batches per TBB task on long spans.
 constexpr size_t kBatchGrain = 4;
@@ -115,7 +116,7 @@ struct HeightFieldTracer::Impl {
   float max_height_mm = 0;
   std::vector<float> vertices;  // x, y, z of (w + 2) x (h + 2) vertices, + 1 float for Embree's
                                 // 16-byte loads
-  std::vector<std::vector<float>> levels;  // levels[k - 1]: maxima of 2^k blocks, k >= 1
+  std::vector<std::vector<float>> levels;      // levels[k - 1]: maxima of 2^k blocks, k >= 1
   std::vector<int> level_width, level_height;  // for k = 0 (texels) and up
 
   ~Impl() {
@@ -126,9 +127,9 @@ struct HeightFieldTracer::Impl {
   Status EmbreeStatus(const char* what) const {
     const RTCError e = rtcGetDeviceError(device);
     if (e == RTC_ERROR_NONE) return Status::Ok();
-    return Error{std::string("height-field tracer: ") + what + ": " +
-                 (last_error.empty() ? "Embree error " + std::to_string(static_cast<int>(e))
-                                     : last_error)};
+    return Error{
+        std::string("height-field tracer: ") + what + ": " +
+        (last_error.empty() ? "Embree error " + std::to_string(static_cast<int>(e)) : last_error)};
   }
 
   // Height of texel (x, y): vertex (x + 1, y + 1) of the buffer (the outline ring is row and
@@ -173,8 +174,9 @@ struct HeightFieldTracer::Impl {
   // blocks read).
   float BoxMax(int x0, int x1, int y0, int y1) const {
     const int span = std::max(x1 - x0, y1 - y0) + 1;
-    const int k = std::min(std::max(0, static_cast<int>(std::bit_width(static_cast<unsigned>(span))) - 2),
-                           static_cast<int>(levels.size()));
+    const int k =
+        std::min(std::max(0, static_cast<int>(std::bit_width(static_cast<unsigned>(span))) - 2),
+                 static_cast<int>(levels.size()));
     // Two running maxima: halves the dependency chain of max operations.
     float m0 = -std::numeric_limits<float>::infinity(), m1 = m0;
     if (k == 0) {
@@ -224,7 +226,7 @@ struct HeightFieldTracer::Impl {
   // The tfar to trace ray (o, d, tfar) with, or a negative value when the ray is proven free
   // (nothing within [tnear, tfar]). `offset`: the origin lift and tnear (mm).
   float CutRay(const Vec3f& o, const Vec3f& d, float tfar, float offset) const {
-    if (!(d.z() > 0.0f)) return tfar;  // level or downwards: always traced
+    if (!(d.z() > 0.0f)) return tfar;    // level or downwards: always traced
     if (!(tfar > offset)) return -1.0f;  // an empty interval: Embree finds nothing either
     // The origin height Embree gets (float), so both sides compare the same numbers; z_start is
     // the ray's height at tnear, where hits begin to count.
@@ -234,7 +236,8 @@ struct HeightFieldTracer::Impl {
     // Beyond t_reach(bound) the ray is higher than `bound`.
     auto t_reach = [&](double bound) { return (bound - lifted_z) * inv_dz; };
     auto cut = [&](double bound) {
-      return static_cast<float>(std::min<double>(tfar, t_reach(bound) * (1 + kReachSlack) + offset));
+      return static_cast<float>(
+          std::min<double>(tfar, t_reach(bound) * (1 + kReachSlack) + offset));
     };
     double bound = max_height_mm;
     if (bound <= z_start) return -1.0f;
@@ -253,8 +256,8 @@ struct HeightFieldTracer::Impl {
     for (int round = 0; round < kSkipRounds; ++round) {
       const double t_end = std::min<double>(tfar, t_reach(bound));
       const double ex = tx + t_end * ddx, ey = ty + t_end * ddy;
-      if (!BoxTexels(std::min(sx, ex), std::max(sx, ex), std::min(sy, ey), std::max(sy, ey), x0,
-                     x1, y0, y1))
+      if (!BoxTexels(std::min(sx, ex), std::max(sx, ex), std::min(sy, ey), std::max(sy, ey), x0, x1,
+                     y0, y1))
         return -1.0f;  // the footprint misses the surface
       const double refined = BoxMax(x0, x1, y0, y1);
       if (refined <= z_start) return -1.0f;
@@ -345,9 +348,9 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   const int cells_x = vw - 1, cells_y = vh - 1;
   const int tiles_x = (cells_x + kGridCells - 1) / kGridCells;
   const int tiles_y = (cells_y + kGridCells - 1) / kGridCells;
-  auto* grids = static_cast<RTCGrid*>(rtcSetNewGeometryBuffer(
-      g, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid),
-      static_cast<size_t>(tiles_x) * static_cast<size_t>(tiles_y)));
+  auto* grids = static_cast<RTCGrid*>(
+      rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid),
+                              static_cast<size_t>(tiles_x) * static_cast<size_t>(tiles_y)));
   if (Status s = impl->EmbreeStatus("grid buffers"); !s.ok() || !grids) {
     rtcReleaseGeometry(g);
     return Error{s.ok() ? "height-field tracer: grid buffer allocation failed" : s.message()};
@@ -356,8 +359,8 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
     for (int tx = 0; tx < tiles_x; ++tx) {
       const int c0 = tx * kGridCells, r0 = ty * kGridCells;
       RTCGrid& grid = grids[static_cast<size_t>(ty) * tiles_x + tx];
-      grid.startVertexID = static_cast<unsigned>(r0) * static_cast<unsigned>(vw) +
-                           static_cast<unsigned>(c0);
+      grid.startVertexID =
+          static_cast<unsigned>(r0) * static_cast<unsigned>(vw) + static_cast<unsigned>(c0);
       grid.stride = static_cast<unsigned>(vw);
       grid.width = static_cast<unsigned short>(std::min(kGridCells, cells_x - c0) + 1);
       grid.height = static_cast<unsigned short>(std::min(kGridCells, cells_y - r0) + 1);
@@ -373,10 +376,9 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   return HeightFieldTracer(std::move(impl));
 }
 
-void HeightFieldTracer::Occluded(std::span<const Vec3f> origins,
-                                 std::span<const Vec3f> directions, std::span<const float> tfar,
-                                 std::span<uint8_t> blocked, const TraceOptions& options,
-                                 TraceStats* stats) const {
+void HeightFieldTracer::Occluded(std::span<const Vec3f> origins, std::span<const Vec3f> directions,
+                                 std::span<const float> tfar, std::span<uint8_t> blocked,
+                                 const TraceOptions& options, TraceStats* stats) const {
   DIGITIZE_CHECK(impl_, "HeightFieldTracer::Occluded on a moved-from tracer");
   const size_t n = origins.size();
   DIGITIZE_CHECK(directions.size() == n && tfar.size() == n && blocked.size() == n,
@@ -452,9 +454,8 @@ void HeightFieldTracer::Occluded(std::span<const Vec3f> origins,
   }
 }
 
-void HeightFieldTracer::Intersect(std::span<const Vec3f> origins,
-                                  std::span<const Vec3f> directions, std::span<SurfaceHit> hits,
-                                  const TraceOptions& options) const {
+void HeightFieldTracer::Intersect(std::span<const Vec3f> origins, std::span<const Vec3f> directions,
+                                  std::span<SurfaceHit> hits, const TraceOptions& options) const {
   DIGITIZE_CHECK(impl_, "HeightFieldTracer::Intersect on a moved-from tracer");
   const size_t n = origins.size();
   DIGITIZE_CHECK(directions.size() == n && hits.size() == n,
@@ -477,9 +478,9 @@ void HeightFieldTracer::Intersect(std::span<const Vec3f> origins,
       for (size_t k = 0; k < count; ++k) {
         const Vec3f& o = origins[first + k];
         const Vec3f& d = directions[first + k];
-        DIGITIZE_CHECK(IsValid(o) && IsValid(d),
-                       "HeightFieldTracer::Intersect: ray " + std::to_string(first + k) +
-                           " has a non-finite origin or direction");
+        DIGITIZE_CHECK(IsValid(o) && IsValid(d), "HeightFieldTracer::Intersect: ray " +
+                                                     std::to_string(first + k) +
+                                                     " has a non-finite origin or direction");
         RTCRayHit& r = rays[k];
         r.ray.org_x = o.x();
         r.ray.org_y = o.y();

@@ -38,10 +38,9 @@ Vec3d BilinearNormal(const Grid<Vec3f>& normals, double tx, double ty) {
   const int y0 = std::min(static_cast<int>(ty), normals.height - 2);
   const int x1 = x0 + 1, y1 = y0 + 1;
   const double fx = tx - x0, fy = ty - y0;
-  const Vec3d n = (1 - fy) * ((1 - fx) * normals(x0, y0).cast<double>() +
-                              fx * normals(x1, y0).cast<double>()) +
-                  fy * ((1 - fx) * normals(x0, y1).cast<double>() +
-                        fx * normals(x1, y1).cast<double>());
+  const Vec3d n =
+      (1 - fy) * ((1 - fx) * normals(x0, y0).cast<double>() + fx * normals(x1, y0).cast<double>()) +
+      fy * ((1 - fx) * normals(x0, y1).cast<double>() + fx * normals(x1, y1).cast<double>());
   const double len = n.norm();
   if (!(std::isfinite(len) && len > 1e-12)) return Vec3d::UnitZ();
   return n / len;
@@ -59,8 +58,8 @@ void CameraRay(const Camera& camera, int u, int v, Vec3d& origin, Vec3d& directi
     return;
   }
   origin = camera.CentreInScan();
-  direction = scan_from_camera * Vec3d((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0)
-                                     .normalized();
+  direction = scan_from_camera *
+              Vec3d((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0).normalized();
 }
 
 }  // namespace
@@ -76,19 +75,20 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
                        const RigidTransform& canvas_from_scan, const Camera& camera,
                        const Light& light, const RelightOptions& options) {
   const int w = canvas.width(), h = canvas.height();
-  DIGITIZE_CHECK(tracer.width() == w && tracer.height() == h && tracer.pitch_mm() == canvas.pitch_mm,
-                 "RenderRelit: the tracer (" + Size(tracer.width(), tracer.height()) +
-                     ") was not built from this canvas (" + Size(w, h) + ")");
+  DIGITIZE_CHECK(
+      tracer.width() == w && tracer.height() == h && tracer.pitch_mm() == canvas.pitch_mm,
+      "RenderRelit: the tracer (" + Size(tracer.width(), tracer.height()) +
+          ") was not built from this canvas (" + Size(w, h) + ")");
   DIGITIZE_CHECK(SameSize(canvas.state, w, h), "RenderRelit: canvas state is " +
                                                    Size(canvas.state.width, canvas.state.height) +
                                                    ", heights " + Size(w, h));
-  DIGITIZE_CHECK(SameSize(normals, w, h), "RenderRelit: normals are " +
-                                              Size(normals.width, normals.height) +
-                                              ", canvas " + Size(w, h));
-  DIGITIZE_CHECK(SameSize(maps.rho_d, w, h) && SameSize(maps.rho_s, w, h) &&
-                     SameSize(maps.lobe, w, h),
-                 "RenderRelit: reflectance maps are " + Size(maps.width(), maps.height()) +
-                     " (or differ among themselves), canvas " + Size(w, h));
+  DIGITIZE_CHECK(
+      SameSize(normals, w, h),
+      "RenderRelit: normals are " + Size(normals.width, normals.height) + ", canvas " + Size(w, h));
+  DIGITIZE_CHECK(
+      SameSize(maps.rho_d, w, h) && SameSize(maps.rho_s, w, h) && SameSize(maps.lobe, w, h),
+      "RenderRelit: reflectance maps are " + Size(maps.width(), maps.height()) +
+          " (or differ among themselves), canvas " + Size(w, h));
   DIGITIZE_CHECK(camera.width >= 0 && camera.height >= 0, "RenderRelit: negative camera size");
   if (Status s = options.Validate(); !s.ok()) DIGITIZE_CHECK(false, "RenderRelit: " + s.message());
 
@@ -149,15 +149,15 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
         const Vec3d p_canvas =
             origins[u].cast<double>() + static_cast<double>(hit.t) * directions[u].cast<double>();
         const Vec3d p_scan = scan_from_canvas.Apply(p_canvas);
-        const TangentFrame frame = MakeTangentFrame(BilinearNormal(normals, hit.texel_x, hit.texel_y));
+        const TangentFrame frame =
+            MakeTangentFrame(BilinearNormal(normals, hit.texel_x, hit.texel_y));
         const Vec3d v_canvas = canvas_rotation * camera.DirectionToCamera(p_scan);
         const Vec3d l_canvas = canvas_rotation * light.DirectionTo(p_scan);
         const Vec3f v_local = frame.ToLocal(v_canvas).cast<float>();
         const Vec3f l_local = frame.ToLocal(l_canvas).cast<float>();
         if (!(v_local.z() > 0.0f && l_local.z() > 0.0f)) continue;  // radiance 0
         const Vec3f f = EvaluateLafortune(maps.At(ix, iy), v_local, l_local);
-        const Vec3f radiance =
-            (f * l_local.z()).cwiseProduct(light.IrradianceAt(p_scan));
+        const Vec3f radiance = (f * l_local.z()).cwiseProduct(light.IrradianceAt(p_scan));
         if (!options.shadows) {
           rgb[u] = radiance;
           continue;
@@ -182,9 +182,7 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
     }
     shadowed_total.fetch_add(shadowed, std::memory_order_relaxed);
   };
-  auto run = [&] {
-    tbb::parallel_for(tbb::blocked_range<int>(0, camera.height, 4), render_rows);
-  };
+  auto run = [&] { tbb::parallel_for(tbb::blocked_range<int>(0, camera.height, 4), render_rows); };
   if (options.num_threads > 0) {
     tbb::task_arena arena(options.num_threads);
     arena.execute(run);
@@ -200,11 +198,11 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
 
 ImageComparison CompareImages(const Grid<Vec3f>& test, const Grid<Vec3f>& reference,
                               const Grid<uint8_t>& mask, double peak) {
-  DIGITIZE_CHECK(SameSize(reference, test.width, test.height) &&
-                     SameSize(mask, test.width, test.height),
-                 "CompareImages: sizes differ (test " + Size(test.width, test.height) +
-                     ", reference " + Size(reference.width, reference.height) + ", mask " +
-                     Size(mask.width, mask.height) + ")");
+  DIGITIZE_CHECK(
+      SameSize(reference, test.width, test.height) && SameSize(mask, test.width, test.height),
+      "CompareImages: sizes differ (test " + Size(test.width, test.height) + ", reference " +
+          Size(reference.width, reference.height) + ", mask " + Size(mask.width, mask.height) +
+          ")");
   DIGITIZE_CHECK(std::isfinite(peak) && peak > 0,
                  "CompareImages: peak must be finite and > 0, got " + FormatNumber(peak));
   ImageComparison c;
@@ -217,8 +215,8 @@ ImageComparison CompareImages(const Grid<Vec3f>& test, const Grid<Vec3f>& refere
   if (c.pixels == 0) return c;  // nothing compared: psnr 0, rmse 0
   const double mse = sum / (3.0 * static_cast<double>(c.pixels));
   c.rmse = std::sqrt(mse);
-  c.psnr_db = mse > 0 ? 10.0 * std::log10(peak * peak / mse)
-                      : std::numeric_limits<double>::infinity();
+  c.psnr_db =
+      mse > 0 ? 10.0 * std::log10(peak * peak / mse) : std::numeric_limits<double>::infinity();
   return c;
 }
 

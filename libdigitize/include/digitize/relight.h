@@ -35,8 +35,8 @@ struct RelightOptions {
 };
 
 struct RelitImage {
-  Grid<Vec3f> rgb;      // linear radiance, camera size
-  Grid<uint8_t> mask;   // 1 where the pixel sees a canvas texel (not kOutside), else 0
+  Grid<Vec3f> rgb;     // linear radiance, camera size
+  Grid<uint8_t> mask;  // 1 where the pixel sees a canvas texel (not kOutside), else 0
   // Canvas pixels whose light was blocked. Shadow rays are cast only from pixels that face both
   // the camera and the light (n.v > 0, n.l > 0): the others are dark anyway and not counted.
   size_t shadowed_pixels = 0;
