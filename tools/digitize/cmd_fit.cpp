@@ -18,6 +18,7 @@ struct FitArgs {
   PhotoSetOptions photo;
   ReflectanceFitOptions options;
   int threads = 0;
+  CLI::Option* dark_ratio_option = nullptr;
 };
 
 // The canvas a photo set is fitted on: a preprocess output folder, or for an RTI capture without
@@ -53,6 +54,12 @@ int RunFit(FitArgs args) {
   ProgressBar bar("fit");
   Result<PhotoSet> set = ReadPhotos(args.photos, args.photo, bar.Callback());
   if (!set.ok()) return Fail(cmd, set.error().message);
+  // RTI captures have uncalibrated light intensities (a hand-held light's distance varies), so a
+  // dim light looks like a shadow to the unmodelled-shadow test: off unless asked for.
+  if (set->is_rti && args.dark_ratio_option->count() == 0) {
+    args.options.dark_outlier_ratio = 0;
+    args.options.dark_outlier_fit_ratio = 0;
+  }
   Result<PreprocessedCanvas> canvas = LoadCanvas(args, *set);
   if (!canvas.ok()) return Fail(cmd, canvas.error().message);
   Result<ReflectanceFitResult> result = FitReflectance(
@@ -121,9 +128,11 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
   c->add_option("--max-specular-albedo", args->options.fit.max_specular_albedo,
                 "Energy bound of the lobe: rho_s 2 pi / (k + 2) <= this (raise for uncalibrated lights)")
       ->capture_default_str()->group("Fit");
-  c->add_option("--dark-outlier-ratio", args->options.dark_outlier_ratio,
-                "Samples below this share of the diffuse floor are unmodelled shadows (<= 0: keep all)")
-      ->capture_default_str()->group("Fit");
+  args->dark_ratio_option =
+      c->add_option("--dark-outlier-ratio", args->options.dark_outlier_ratio,
+                    "Samples below this share of the diffuse floor are unmodelled shadows (<= 0: "
+                    "keep all; RTI captures: off unless given)")
+          ->capture_default_str()->group("Fit");
   c->add_option("--min-cos", args->options.samples.min_cos,
                 "n.v and n.l must exceed this (0 = anything above the horizon)")
       ->capture_default_str()->group("Samples");
