@@ -270,13 +270,16 @@ Status WriteSyntheticPhotoSet(const fs::path& dir, const SyntheticPhotoSet& set)
   if (Status s = WriteFloatExr(dir / "truth" / "rho_s.exr", t.rho_s, {"R", "G", "B"}, meta); !s.ok())
     return s;
   {
-    OIIO::ImageSpec spec(t.lobe.width, t.lobe.height, 4, OIIO::TypeDesc::FLOAT);
-    spec.channelnames = {"cx", "cy", "cz", "k"};
-    spec.alpha_channel = -1;
-    spec.attribute("compression", "zip");
-    spec.attribute("digitize:frame", "canvas texel grid (row 0 = top)");
-    spec.attribute("digitize:quantity", "Lafortune lobe (cx, cy, cz = 1, k), tangent frame");
-    if (Status s = WriteOiio(dir / "truth" / "lobe.exr", "openexr", spec, t.lobe.data.data());
+    // cz is 1 everywhere (the stored gauge): three channels, which every reader here opens.
+    Grid<Vec3f> lobe(t.lobe.width, t.lobe.height);
+    for (size_t i = 0; i < lobe.size(); ++i) {
+      const auto& c = t.lobe.data[i];
+      lobe.data[i] = Vec3f(c[0], c[1], c[3]);
+    }
+    const ImageMetadata lobe_meta = {
+        {"digitize:frame", "canvas texel grid (row 0 = top)"},
+        {"digitize:quantity", "Lafortune lobe cx, cy, k (cz = 1), tangent frame (tangent_frame.h)"}};
+    if (Status s = WriteFloatExr(dir / "truth" / "lobe.exr", lobe, {"cx", "cy", "k"}, lobe_meta);
         !s.ok())
       return s;
   }
