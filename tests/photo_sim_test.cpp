@@ -733,7 +733,7 @@ TEST(PhotoSimMaterials, DefaultsSpanMatteToVarnishWithinTheEnergyBound) {
     EXPECT_FALSE(m.is_measured);
     ASSERT_TRUE(m.lafortune.Validate().ok()) << m.lafortune.Validate().message();
     const Vec3f albedo = m.lafortune.rho_d * static_cast<float>(kPi);
-    EXPECT_GE(albedo.minCoeff(), 0.03f);
+    EXPECT_GE(albedo.minCoeff(), 0.05f - 1e-6f);
     EXPECT_LE(albedo.maxCoeff(), 0.8f + 1e-6f);
     // Specular albedo rho_s 2 pi / (k + 2): at most 1, and with the diffuse albedo below 1.
     const float a_s = m.lafortune.rho_s.maxCoeff() * 2 * static_cast<float>(kPi) / (m.lafortune.k + 2);

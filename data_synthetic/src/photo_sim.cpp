@@ -365,7 +365,7 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
       {"satin (vermilion)", {0.50f, 0.13f, 0.08f}, 0.08f, 6.0f, -1.0f, -1.0f},
       {"semi-gloss (green earth)", {0.16f, 0.30f, 0.17f}, 0.06f, 30.0f, -1.0f, -1.0f},
       {"gloss (ultramarine)", {0.07f, 0.09f, 0.33f}, 0.05f, 100.0f, -1.0f, -1.0f},
-      {"varnish (dark umber)", {0.07f, 0.05f, 0.035f}, 0.04f, 400.0f, -1.0f, -1.0f},
+      {"varnish (dark umber)", {0.09f, 0.065f, 0.05f}, 0.04f, 400.0f, -1.0f, -1.0f},
       // Anisotropic and off-specular: the lobe is narrower along the canvas X axis than along
       // Y, and its peak leans towards the normal (|c| < 1).
       {"anisotropic off-specular (lead white)", {0.80f, 0.77f, 0.68f}, 0.06f, 20.0f, -0.95f,
