@@ -106,8 +106,8 @@ RigidTransform SomeCanvasFromScan() {
 // Canvas-frame point where pixel (u, v)'s ray meets the plane Z = z_mm.
 Vec3d PlaneHit(const Camera& cam, const RigidTransform& canvas_from_scan, double u, double v,
                double z_mm = 0) {
-  const Vec3d d_scan =
-      cam.camera_from_scan.rotation.transpose() * Vec3d((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1);
+  const Vec3d d_scan = cam.camera_from_scan.rotation.transpose() *
+                       Vec3d((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1);
   const Vec3d eye = canvas_from_scan.Apply(cam.CentreInScan());
   const Vec3d d = canvas_from_scan.ApplyToDirection(d_scan);
   return eye + (z_mm - eye.z()) / d.z() * d;
@@ -127,7 +127,9 @@ Vec3f FlatLambert(const Vec3f& rho_d, const Light& light, const RigidTransform& 
   return (rho_d.cast<double>() * light.intensity.x() * cos_l / (d * d)).cast<float>();
 }
 
-double SrgbOetf(double x) { return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055; }
+double SrgbOetf(double x) {
+  return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055;
+}
 double SrgbEotf(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
 bool SameRgb(const Grid<Vec3f>& a, const Grid<Vec3f>& b) {
@@ -182,17 +184,20 @@ TEST(PhotoSimAnalytic, InverseSquareAndCosineAcrossTheCanvas) {
   const RigidTransform cfs = SomeCanvasFromScan();
   for (double elevation : {90.0, 40.0}) {
     const Vec3f albedo(0.6f, 0.6f, 0.6f);
-    const SyntheticPhotoSet set = SimulatePhotoSet(scene, cfs, OneLight(elevation), {Matte(albedo)});
+    const SyntheticPhotoSet set =
+        SimulatePhotoSet(scene, cfs, OneLight(elevation), {Matte(albedo)});
     const Photo& photo = set.fit.photos[0];
     const Vec3d light = cfs.Apply(photo.light.position_mm);
     // Points spread over the canvas, clear of the frame's shadow: at 40 deg from +X it covers
     // 25 mm raise / tan 40 = 30 mm along the +X edge, so stay 40 mm from that edge.
     const double W = painting.width_mm, H = painting.height_mm;
     int checked = 0;
-    for (const Vec3d& p : {Vec3d(0.5 * W, 0.5 * H, 0), Vec3d(10, 10, 0), Vec3d(W - 40, 10, 0),
-                           Vec3d(10, H - 10, 0), Vec3d(W - 40, H - 40, 0), Vec3d(0.3 * W, 0.7 * H, 0)}) {
+    for (const Vec3d& p :
+         {Vec3d(0.5 * W, 0.5 * H, 0), Vec3d(10, 10, 0), Vec3d(W - 40, 10, 0), Vec3d(10, H - 10, 0),
+          Vec3d(W - 40, H - 40, 0), Vec3d(0.3 * W, 0.7 * H, 0)}) {
       const Eigen::Vector2d px = PixelOf(photo.camera, cfs, p);
-      const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+      const int u = static_cast<int>(std::lround(px.x())),
+                v = static_cast<int>(std::lround(px.y()));
       const Vec3d hit = PlaneHit(photo.camera, cfs, u, v);
       const Vec3f exact = FlatLambert(albedo / static_cast<float>(kPi), photo.light, cfs, hit);
       EXPECT_NEAR(photo.rgb(u, v).x(), exact.x(), kFloatRelTol * exact.x())
@@ -272,8 +277,8 @@ TEST(PhotoSimAnalytic, GlossyHighlightAtTheMirrorPoint) {
   const Vec3d lp = cfs.Apply(light.position_mm);
   const double d = (lp - m).norm();
   const PaintMaterial g = Glossy(400, 0.04f);
-  const double peak =
-      (g.lafortune.rho_d.y() + g.lafortune.rho_s.y()) * (lp.z() / d) * light.intensity.y() / (d * d);
+  const double peak = (g.lafortune.rho_d.y() + g.lafortune.rho_s.y()) * (lp.z() / d) *
+                      light.intensity.y() / (d * d);
   EXPECT_LT(photo.rgb(bu, bv).y(), peak * 1.005);
   EXPECT_GT(photo.rgb(bu, bv).y(), peak * 0.98);
   // 130 mm away (on the canvas, towards -X: the mirror angle is 15 deg off) only the diffuse
@@ -353,7 +358,7 @@ TEST(PhotoSimShadows, FlatCanvasUnderAHighLightHasNoShadowAcne) {
   const Painting painting = MakePainting(FlatPainting(160));
   const Scene scene(painting, FrameOptions{});
   PhotoSimOptions o = OneLight(90);  // straight above: not even the frame casts a shadow
-  o.pixels_per_texel = 1.0;  // pixel centres on texel centres, the grid's vertices
+  o.pixels_per_texel = 1.0;          // pixel centres on texel centres, the grid's vertices
   const auto set = SimulatePhotoSet(scene, RigidTransform{}, o, {Matte({0.5f, 0.5f, 0.5f})});
   EXPECT_GT(set.canvas_lit_pixels, 10000u);
   EXPECT_EQ(set.shadowed_pixels, 0u);
@@ -519,8 +524,8 @@ TEST(PhotoSimGeometry, CamerasAndLightsWhereTheOptionsPutThem) {
     // Upright: canvas +X to the right, canvas +Y up (towards row 0) near the centre.
     EXPECT_GT(PixelOf(cam, cfs, centre + Vec3d(10, 0, 0)).x(), pc.x());
     EXPECT_LT(PixelOf(cam, cfs, centre + Vec3d(0, 10, 0)).y(), pc.y());
-    for (int j = 0; j < 12; ++j) EXPECT_EQ(set.fit.photos[c * 12 + j].light.position_mm,
-                                           set.fit.photos[j].light.position_mm);
+    for (int j = 0; j < 12; ++j)
+      EXPECT_EQ(set.fit.photos[c * 12 + j].light.position_mm, set.fit.photos[j].light.position_mm);
   }
   // The top view samples the centre at pixels_per_texel.
   const Camera& top = set.fit.photos[12].camera;
@@ -538,7 +543,8 @@ TEST(PhotoSimGeometry, CamerasAndLightsWhereTheOptionsPutThem) {
 
   // Lights: on the dome, within the elevations, none repeated; held-out ones between them.
   std::vector<Vec3d> fit_dirs, held_dirs;
-  for (int j = 0; j < 12; ++j) fit_dirs.push_back(cfs.Apply(set.fit.photos[j].light.position_mm) - centre);
+  for (int j = 0; j < 12; ++j)
+    fit_dirs.push_back(cfs.Apply(set.fit.photos[j].light.position_mm) - centre);
   for (int j = 0; j < 4; ++j)
     held_dirs.push_back(cfs.Apply(set.held_out.photos[j].light.position_mm) - centre);
   for (const auto* dirs : {&fit_dirs, &held_dirs}) {
@@ -552,12 +558,14 @@ TEST(PhotoSimGeometry, CamerasAndLightsWhereTheOptionsPutThem) {
   for (const Vec3d& h : held_dirs)
     for (const Vec3d& f : fit_dirs) EXPECT_GT(AngleDeg(h, f), 2.0);
   for (size_t i = 0; i < fit_dirs.size(); ++i)
-    for (size_t j = i + 1; j < fit_dirs.size(); ++j) EXPECT_GT(AngleDeg(fit_dirs[i], fit_dirs[j]), 5.0);
+    for (size_t j = i + 1; j < fit_dirs.size(); ++j)
+      EXPECT_GT(AngleDeg(fit_dirs[i], fit_dirs[j]), 5.0);
   // Lights on every side of the canvas (the spiral turns by the golden angle).
   int quadrants = 0;
   for (int q = 0; q < 4; ++q) {
     bool any = false;
-    for (const Vec3d& d : fit_dirs) any |= static_cast<int>(std::floor((std::atan2(d.y(), d.x()) + kPi) / (kPi / 2))) % 4 == q;
+    for (const Vec3d& d : fit_dirs)
+      any |= static_cast<int>(std::floor((std::atan2(d.y(), d.x()) + kPi) / (kPi / 2))) % 4 == q;
     quadrants += any;
   }
   EXPECT_EQ(quadrants, 4);
@@ -614,7 +622,8 @@ void ExpectRoundTrip(const fs::path& dir, const SyntheticPhotoSet& set) {
     EXPECT_EQ(b.camera.fx, a.camera.fx);
     EXPECT_EQ(b.camera.cy, a.camera.cy);
     // JSON numbers round trip; the reader snaps the rotation to the nearest one (~1e-16).
-    EXPECT_LT((b.camera.camera_from_scan.rotation - a.camera.camera_from_scan.rotation).norm(), 1e-12);
+    EXPECT_LT((b.camera.camera_from_scan.rotation - a.camera.camera_from_scan.rotation).norm(),
+              1e-12);
     EXPECT_EQ(b.camera.camera_from_scan.translation, a.camera.camera_from_scan.translation);
     EXPECT_EQ(b.light.type, LightType::kPoint);
     EXPECT_EQ(b.light.position_mm, a.light.position_mm);
@@ -680,7 +689,8 @@ TEST_F(PhotoSimTest, EveryEncodingRoundTripsThroughReadCalibration) {
   o.noise_sigma = 0.003;
   o.white_level = 1.5;  // some saturation in the integer encodings
   const auto materials = DefaultPaintMaterials(true);
-  for (PhotoEncoding e : {PhotoEncoding::kSrgb8, PhotoEncoding::kSrgb16, PhotoEncoding::kLinearExr}) {
+  for (PhotoEncoding e :
+       {PhotoEncoding::kSrgb8, PhotoEncoding::kSrgb16, PhotoEncoding::kLinearExr}) {
     SCOPED_TRACE(ToString(e));
     o.encoding = e;
     const auto set = SimulatePhotoSet(scene, SomeCanvasFromScan(), o, materials);
@@ -736,7 +746,8 @@ TEST(PhotoSimMaterials, DefaultsSpanMatteToVarnishWithinTheEnergyBound) {
     EXPECT_GE(albedo.minCoeff(), 0.05f - 1e-6f);
     EXPECT_LE(albedo.maxCoeff(), 0.8f + 1e-6f);
     // Specular albedo rho_s 2 pi / (k + 2): at most 1, and with the diffuse albedo below 1.
-    const float a_s = m.lafortune.rho_s.maxCoeff() * 2 * static_cast<float>(kPi) / (m.lafortune.k + 2);
+    const float a_s =
+        m.lafortune.rho_s.maxCoeff() * 2 * static_cast<float>(kPi) / (m.lafortune.k + 2);
     EXPECT_LE(a_s, 1.0f);
     EXPECT_LT(albedo.maxCoeff() + a_s, 1.0f);
     EXPECT_LE(std::abs(m.lafortune.cx), 1.0f);
@@ -796,7 +807,8 @@ TEST(PhotoSimMaterials, MeasuredPaintIsNonNegativeReciprocalAndNoOneLobeMaterial
   const Vec3f l(0.6f, 0, 0.8f), mirror(-0.6f, 0, 0.8f);
   EXPECT_GT(blue.Evaluate(l, l).x(), blue.Evaluate(mirror, l).x());
   for (size_t m = 0; m + 1 < materials.size(); ++m)
-    EXPECT_LE(materials[m].Evaluate(l, l).x(), materials[m].Evaluate(mirror, l).x()) << materials[m].name;
+    EXPECT_LE(materials[m].Evaluate(l, l).x(), materials[m].Evaluate(mirror, l).x())
+        << materials[m].name;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -853,11 +865,11 @@ TEST(PhotoSimOptionsTest, ProgressRisesToOneUnderTheStepRender) {
   o.lights = 4;
   o.held_out_lights = 2;
   std::vector<double> fractions;
-  const auto set = SimulatePhotoSet(scene, RigidTransform{}, o, {},
-                                    [&](std::string_view step, double f) {
-                                      EXPECT_EQ(step, "render");
-                                      fractions.push_back(f);
-                                    });
+  const auto set =
+      SimulatePhotoSet(scene, RigidTransform{}, o, {}, [&](std::string_view step, double f) {
+        EXPECT_EQ(step, "render");
+        fractions.push_back(f);
+      });
   ASSERT_GE(fractions.size(), 2u);
   EXPECT_EQ(fractions.front(), 0.0);
   EXPECT_EQ(fractions.back(), 1.0);
@@ -870,9 +882,10 @@ TEST(PhotoSimOptionsTest, ProgressRisesToOneUnderTheStepRender) {
 // The command line.
 
 int RunCli(const std::string& args, std::string* output) {
-  const fs::path log = fs::temp_directory_path() /
-                       ("digitize_photosim_cli_" + std::to_string(::getpid()) + ".log");
-  const std::string command = std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
+  const fs::path log =
+      fs::temp_directory_path() / ("digitize_photosim_cli_" + std::to_string(::getpid()) + ".log");
+  const std::string command =
+      std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
   const int status = std::system(command.c_str());
   std::ifstream in(log);
   std::stringstream text;
@@ -912,7 +925,8 @@ TEST_F(PhotoSimTest, SynthPhotosWritesACalibrationInTheScanFrame) {
     return o;
   }());
   EXPECT_TRUE(CheckCamerasSeeCanvas(*set, cfs, painting.truth).ok());
-  const Vec3d centre_scan = cfs.Inverse().Apply(Vec3d(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0));
+  const Vec3d centre_scan =
+      cfs.Inverse().Apply(Vec3d(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0));
   const Camera& cam = set->photos[0].camera;
   EXPECT_NEAR(cam.Project(centre_scan).x(), cam.cx, 1e-3);
   // --measured puts the measured paint on a region.
@@ -922,11 +936,14 @@ TEST_F(PhotoSimTest, SynthPhotosWritesACalibrationInTheScanFrame) {
 
   // Photo flags without --photos are a usage error; without any, the scan alone as before.
   EXPECT_NE(RunCli("synth -o " + (dir_ / "x").string() + " --resolution 64 --lights 3", &text), 0);
-  ASSERT_EQ(RunCli("synth -o " + (dir_ / "plain").string() + " --resolution 64 --scan-size 64 64", &text), 0)
+  ASSERT_EQ(
+      RunCli("synth -o " + (dir_ / "plain").string() + " --resolution 64 --scan-size 64 64", &text),
+      0)
       << text;
   EXPECT_FALSE(fs::exists(dir_ / "plain" / "photos"));
   ASSERT_EQ(RunCli("synth --help", &text), 0);
-  for (const char* flag : {"--photos", "--lights", "--cameras", "--photo-encoding", "--photo-noise", "--measured"})
+  for (const char* flag :
+       {"--photos", "--lights", "--cameras", "--photo-encoding", "--photo-noise", "--measured"})
     EXPECT_NE(text.find(flag), std::string::npos) << flag;
 }
 

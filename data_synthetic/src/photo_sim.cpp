@@ -31,8 +31,8 @@ constexpr double kDeg = kPi / 180;
 // pi (3 - sqrt 5): successive lights of the spiral turn by this azimuth, so that any run of them
 // spreads evenly around the dome.
 constexpr double kGoldenAngleRad = 2.39996322972865332;
-constexpr int kRowGrain = 8;           // image rows per task
-constexpr int kMaxImageSide = 32768;   // a larger image is a wrong option, not a photo
+constexpr int kRowGrain = 8;          // image rows per task
+constexpr int kMaxImageSide = 32768;  // a larger image is a wrong option, not a photo
 // Shadow-ray origins are lifted off the surface along the geometric normal by this much: Embree
 // hits are accurate to a few float ulps of the coordinates (~1e-4 mm at 500 mm), and 2 um is far
 // below any relief the painting has (weave amplitude 30 um), so no self-shadowing acne and no
@@ -152,8 +152,9 @@ View MakeView(const Painting& painting, const PhotoSimOptions& o, const Vec3d& e
   for (double X : {-mx, painting.width_mm + mx}) {
     for (double Y : {-my, painting.height_mm + my}) {
       const Vec3d p = view.camera_from_canvas.Apply(Vec3d(X, Y, 0));
-      DIGITIZE_CHECK(p.z() > 1e-6, "SimulatePhotoSet: the canvas (with its margin) reaches behind "
-                                   "a camera; increase camera_distance_mm or reduce the arc");
+      DIGITIZE_CHECK(p.z() > 1e-6,
+                     "SimulatePhotoSet: the canvas (with its margin) reaches behind "
+                     "a camera; increase camera_distance_mm or reduce the arc");
       half_u = std::max(half_u, std::abs(f * p.x() / p.z()));
       half_v = std::max(half_v, std::abs(f * p.y() / p.z()));
     }
@@ -179,8 +180,8 @@ Vec3d SpiralLight(const Painting& painting, const PhotoSimOptions& o, double s, 
   const double sin_el = std::clamp(sin_lo + u * (sin_hi - sin_lo), -1.0, 1.0);
   const double cos_el = std::sqrt(std::max(0.0, 1 - sin_el * sin_el));
   const double az = s * kGoldenAngleRad;
-  return CanvasCentre(painting) + o.light_distance_mm * Vec3d(cos_el * std::cos(az),
-                                                              cos_el * std::sin(az), sin_el);
+  return CanvasCentre(painting) +
+         o.light_distance_mm * Vec3d(cos_el * std::cos(az), cos_el * std::sin(az), sin_el);
 }
 
 // Held-out light j of m: between fitting lights (half-integer spiral positions, evenly spread)
@@ -217,8 +218,8 @@ constexpr int kRetraces = 3;
 constexpr double kRetraceStepPx = 1e-3;
 
 void RetraceSlips(const Scene& scene, const View& view, const Mat3d& canvas_from_camera,
-                  float min_height_mm, const std::vector<Vec3d>& origins,
-                  std::vector<Vec3d>& dirs, std::vector<Scene::RayHit>& hits) {
+                  float min_height_mm, const std::vector<Vec3d>& origins, std::vector<Vec3d>& dirs,
+                  std::vector<Scene::RayHit>& hits) {
   const Painting& painting = scene.painting();
   constexpr double kTolMm = 1e-3;
   auto slipped = [&](size_t i) {
@@ -250,54 +251,58 @@ void RetraceSlips(const Scene& scene, const View& view, const Mat3d& canvas_from
 Grid<PixelHit> TracePrimary(const Scene& scene, const View& view,
                             const Grid<uint8_t>& material_index) {
   const Painting& painting = scene.painting();
-  const float min_height_mm = *std::min_element(painting.truth.height_mm.data.begin(),
-                                                painting.truth.height_mm.data.end());
+  const float min_height_mm =
+      *std::min_element(painting.truth.height_mm.data.begin(), painting.truth.height_mm.data.end());
   const HeightField& truth = painting.truth;
   const Grid<Vec3f>& normals = painting.normals;
   const int w = view.camera.width, h = view.camera.height;
   const Camera& cam = view.camera;
   const Mat3d canvas_from_camera = view.camera_from_canvas.rotation.transpose();
   Grid<PixelHit> hits(w, h, PixelHit{});
-  tbb::parallel_for(tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
-    std::vector<Vec3d> origins(static_cast<size_t>(w), view.eye_canvas), dirs(static_cast<size_t>(w));
-    std::vector<Scene::RayHit> row_hits;
-    for (int y = r.begin(); y < r.end(); ++y) {
-      for (int x = 0; x < w; ++x) {
-        dirs[x] = canvas_from_camera * Vec3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
-      }
-      scene.Intersect(origins, dirs, row_hits);
-      RetraceSlips(scene, view, canvas_from_camera, min_height_mm, origins, dirs, row_hits);
-      for (int x = 0; x < w; ++x) {
-        const Scene::RayHit& rh = row_hits[x];
-        PixelHit& out = hits(x, y);
-        out.what = rh.what;
-        if (rh.what == Scene::Hit::kNone) continue;
-        const Vec3d p = view.eye_canvas + rh.t * dirs[x].normalized();
-        out.p = p.cast<float>();
-        out.n_geo = rh.normal.cast<float>();
-        if (rh.what != Scene::Hit::kCanvas) continue;
-        // Nearest texel for the material; bilinear analytic normal for the shading.
-        const Eigen::Vector2d t = truth.TexelFromMm(p.x(), p.y());
-        const double tx = std::clamp(t.x(), 0.0, truth.width() - 1.0);
-        const double ty = std::clamp(t.y(), 0.0, truth.height() - 1.0);
-        const int nx = static_cast<int>(std::lround(tx)), ny = static_cast<int>(std::lround(ty));
-        out.material = material_index(nx, ny);
-        const int x0 = std::min(static_cast<int>(tx), std::max(0, truth.width() - 2));
-        const int y0 = std::min(static_cast<int>(ty), std::max(0, truth.height() - 2));
-        const int x1 = std::min(x0 + 1, truth.width() - 1), y1 = std::min(y0 + 1, truth.height() - 1);
-        const float fx = static_cast<float>(tx - x0), fy = static_cast<float>(ty - y0);
-        Vec3f n = (1 - fy) * ((1 - fx) * normals(x0, y0) + fx * normals(x1, y0)) +
-                  fy * ((1 - fx) * normals(x0, y1) + fx * normals(x1, y1));
-        const TangentFrame frame = MakeTangentFrame(n.cast<double>());
-        const Vec3d v = (view.eye_canvas - p).normalized();
-        out.frame_x = frame.x.cast<float>();
-        out.frame_y = frame.y.cast<float>();
-        out.frame_z = frame.z.cast<float>();
-        out.v_local = frame.ToLocal(v).cast<float>();
-        out.faces_camera = out.v_local.z() > 0;
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
+        std::vector<Vec3d> origins(static_cast<size_t>(w), view.eye_canvas),
+            dirs(static_cast<size_t>(w));
+        std::vector<Scene::RayHit> row_hits;
+        for (int y = r.begin(); y < r.end(); ++y) {
+          for (int x = 0; x < w; ++x) {
+            dirs[x] = canvas_from_camera * Vec3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
+          }
+          scene.Intersect(origins, dirs, row_hits);
+          RetraceSlips(scene, view, canvas_from_camera, min_height_mm, origins, dirs, row_hits);
+          for (int x = 0; x < w; ++x) {
+            const Scene::RayHit& rh = row_hits[x];
+            PixelHit& out = hits(x, y);
+            out.what = rh.what;
+            if (rh.what == Scene::Hit::kNone) continue;
+            const Vec3d p = view.eye_canvas + rh.t * dirs[x].normalized();
+            out.p = p.cast<float>();
+            out.n_geo = rh.normal.cast<float>();
+            if (rh.what != Scene::Hit::kCanvas) continue;
+            // Nearest texel for the material; bilinear analytic normal for the shading.
+            const Eigen::Vector2d t = truth.TexelFromMm(p.x(), p.y());
+            const double tx = std::clamp(t.x(), 0.0, truth.width() - 1.0);
+            const double ty = std::clamp(t.y(), 0.0, truth.height() - 1.0);
+            const int nx = static_cast<int>(std::lround(tx)),
+                      ny = static_cast<int>(std::lround(ty));
+            out.material = material_index(nx, ny);
+            const int x0 = std::min(static_cast<int>(tx), std::max(0, truth.width() - 2));
+            const int y0 = std::min(static_cast<int>(ty), std::max(0, truth.height() - 2));
+            const int x1 = std::min(x0 + 1, truth.width() - 1),
+                      y1 = std::min(y0 + 1, truth.height() - 1);
+            const float fx = static_cast<float>(tx - x0), fy = static_cast<float>(ty - y0);
+            Vec3f n = (1 - fy) * ((1 - fx) * normals(x0, y0) + fx * normals(x1, y0)) +
+                      fy * ((1 - fx) * normals(x0, y1) + fx * normals(x1, y1));
+            const TangentFrame frame = MakeTangentFrame(n.cast<double>());
+            const Vec3d v = (view.eye_canvas - p).normalized();
+            out.frame_x = frame.x.cast<float>();
+            out.frame_y = frame.y.cast<float>();
+            out.frame_z = frame.z.cast<float>();
+            out.v_local = frame.ToLocal(v).cast<float>();
+            out.faces_camera = out.v_local.z() > 0;
+          }
+        }
+      });
   return hits;
 }
 
@@ -347,7 +352,8 @@ struct RenderCounts {
 // ---------------------------------------------------------------------------------------------
 
 Vec3f PaintMaterial::Evaluate(const Vec3f& v, const Vec3f& l) const {
-  return is_measured ? EvaluateMeasuredLafortune(measured, v, l) : EvaluateLafortune(lafortune, v, l);
+  return is_measured ? EvaluateMeasuredLafortune(measured, v, l)
+                     : EvaluateLafortune(lafortune, v, l);
 }
 
 std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
@@ -368,7 +374,11 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
       {"varnish (dark umber)", {0.09f, 0.065f, 0.05f}, 0.04f, 400.0f, -1.0f, -1.0f},
       // Anisotropic and off-specular: the lobe is narrower along the canvas X axis than along
       // Y, and its peak leans towards the normal (|c| < 1).
-      {"anisotropic off-specular (lead white)", {0.80f, 0.77f, 0.68f}, 0.06f, 20.0f, -0.95f,
+      {"anisotropic off-specular (lead white)",
+       {0.80f, 0.77f, 0.68f},
+       0.06f,
+       20.0f,
+       -0.95f,
        -0.55f},
   };
   std::vector<PaintMaterial> out;
@@ -409,9 +419,12 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
 
 const char* ToString(PhotoEncoding e) {
   switch (e) {
-    case PhotoEncoding::kSrgb8: return "srgb8";
-    case PhotoEncoding::kSrgb16: return "srgb16";
-    case PhotoEncoding::kLinearExr: return "exr";
+    case PhotoEncoding::kSrgb8:
+      return "srgb8";
+    case PhotoEncoding::kSrgb16:
+      return "srgb16";
+    case PhotoEncoding::kLinearExr:
+      return "exr";
   }
   return "?";
 }
@@ -421,7 +434,8 @@ Status PhotoSimOptions::Validate() const {
   auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
   if (cameras < 1 || cameras > 64)
     return fail("cameras must be in [1, 64], got " + std::to_string(cameras));
-  if (!in(camera_arc_deg, 0, 80)) return fail("camera_arc_deg must be in [0, 80], got " + Num(camera_arc_deg));
+  if (!in(camera_arc_deg, 0, 80))
+    return fail("camera_arc_deg must be in [0, 80], got " + Num(camera_arc_deg));
   if (!(in(camera_distance_mm, 0, 1e5) && camera_distance_mm > 0))
     return fail("camera_distance_mm must be in (0, 100000], got " + Num(camera_distance_mm));
   if (!(in(pixels_per_texel, 0, 16) && pixels_per_texel > 0))
@@ -442,12 +456,14 @@ Status PhotoSimOptions::Validate() const {
     return fail("held_out_lights must be in [0, 4096], got " + std::to_string(held_out_lights));
   if (!in(held_out_camera_deg, 0, 80))
     return fail("held_out_camera_deg must be in [0, 80], got " + Num(held_out_camera_deg));
-  if (!in(noise_sigma, 0, 1)) return fail("noise_sigma must be in [0, 1] (linear), got " + Num(noise_sigma));
+  if (!in(noise_sigma, 0, 1))
+    return fail("noise_sigma must be in [0, 1] (linear), got " + Num(noise_sigma));
   if (encoding != PhotoEncoding::kSrgb8 && encoding != PhotoEncoding::kSrgb16 &&
       encoding != PhotoEncoding::kLinearExr)
     return fail("encoding must be srgb8, srgb16 or exr, got " +
                 std::to_string(static_cast<int>(encoding)));
-  if (!in(frame_albedo, 0, 1)) return fail("frame_albedo must be in [0, 1], got " + Num(frame_albedo));
+  if (!in(frame_albedo, 0, 1))
+    return fail("frame_albedo must be in [0, 1], got " + Num(frame_albedo));
   return Status::Ok();
 }
 
@@ -518,24 +534,25 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
   const double dist = options.camera_distance_mm;
   std::vector<View> views;
   for (int c = 0; c < options.cameras; ++c) {
-    const double a = options.cameras == 1
-                         ? 0.0
-                         : (-options.camera_arc_deg +
-                            2 * options.camera_arc_deg * c / (options.cameras - 1)) * kDeg;
-    views.push_back(MakeView(painting, options,
-                             centre + dist * Vec3d(std::sin(a), 0, std::cos(a)), canvas_from_scan));
+    const double a =
+        options.cameras == 1
+            ? 0.0
+            : (-options.camera_arc_deg + 2 * options.camera_arc_deg * c / (options.cameras - 1)) *
+                  kDeg;
+    views.push_back(MakeView(painting, options, centre + dist * Vec3d(std::sin(a), 0, std::cos(a)),
+                             canvas_from_scan));
   }
   const int held_out_view = options.cameras;
   {
     const double a = options.held_out_camera_deg * kDeg;
-    views.push_back(MakeView(painting, options,
-                             centre + dist * Vec3d(0, std::sin(a), std::cos(a)), canvas_from_scan));
+    views.push_back(MakeView(painting, options, centre + dist * Vec3d(0, std::sin(a), std::cos(a)),
+                             canvas_from_scan));
   }
 
   // Lights, grey: a white Lambertian at the centre lit head-on reads white_level.
   const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
-  const float intensity = static_cast<float>(options.white_level * kPi *
-                                             options.light_distance_mm * options.light_distance_mm);
+  const float intensity = static_cast<float>(options.white_level * kPi * options.light_distance_mm *
+                                             options.light_distance_mm);
   auto make_light = [&](const Vec3d& p_canvas) {
     Light l;
     l.type = LightType::kPoint;
@@ -611,7 +628,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
 
   // Progress over all rows of all images.
   size_t total_rows = 0;
-  for (size_t v = 0; v < views.size(); ++v) total_rows += jobs_of_view[v].size() * views[v].camera.height;
+  for (size_t v = 0; v < views.size(); ++v)
+    total_rows += jobs_of_view[v].size() * views[v].camera.height;
   std::atomic<size_t> rows_done{0};
   std::mutex progress_mutex;
   int last_percent = 0;
@@ -648,7 +666,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
             const Job& job = jobs[task / blocks];
             const int y0 = static_cast<int>(task % blocks) * kRowGrain;
             const int y1 = std::min(h, y0 + kRowGrain);
-            Photo& photo = job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
+            Photo& photo =
+                job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
             const Vec3f light_f = job.light_canvas.cast<float>();
             size_t saturated = 0, canvas_lit = 0, shadowed = 0;
             for (int y = y0; y < y1; ++y) {
@@ -666,7 +685,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                     max_t[x] = 0;
                     continue;
                   }
-                  origins[x] = (hit.p + hit.n_geo * static_cast<float>(kShadowOffsetMm)).cast<double>();
+                  origins[x] =
+                      (hit.p + hit.n_geo * static_cast<float>(kShadowOffsetMm)).cast<double>();
                   dirs[x] = job.light_canvas - origins[x];
                   max_t[x] = static_cast<float>(dirs[x].norm());
                 }
@@ -696,7 +716,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                 std::copy(radiance.begin(), radiance.end(), dst);
                 continue;
               }
-              for (int x = 0; x < w; ++x) canvas_lit += lit[x] && row[x].what == Scene::Hit::kCanvas;
+              for (int x = 0; x < w; ++x)
+                canvas_lit += lit[x] && row[x].what == Scene::Hit::kCanvas;
               // Fitting image: noise, then the encoding as a camera file would hold it.
               if (noisy) {
                 SplitMixEngine rng = RowStream(options.seed, job.index, y);
