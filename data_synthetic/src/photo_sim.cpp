@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <random>
@@ -30,8 +31,8 @@ constexpr double kDeg = kPi / 180;
 // pi (3 - sqrt 5): successive lights of the spiral turn by this azimuth, so that any run of them
 // spreads evenly around the dome.
 constexpr double kGoldenAngleRad = 2.39996322972865332;
-constexpr int kRowGrain = 8;           // image rows per task
-constexpr int kMaxImageSide = 32768;   // a larger image is a wrong option, not a photo
+constexpr int kRowGrain = 8;          // image rows per task
+constexpr int kMaxImageSide = 32768;  // a larger image is a wrong option, not a photo
 // Shadow-ray origins are lifted off the surface along the geometric normal by this much: Embree
 // hits are accurate to a few float ulps of the coordinates (~1e-4 mm at 500 mm), and 2 um is far
 // below any relief the painting has (weave amplitude 30 um), so no self-shadowing acne and no
@@ -45,12 +46,23 @@ uint64_t SplitMix64(uint64_t x) {
   return x ^ (x >> 31);
 }
 
+// The SplitMix64 sequence as a random bit generator: passes BigCrush, one add and a few mixes
+// per draw, no state to seed (a Mersenne Twister spent more time here than the rendering did:
+// three normals per pixel).
+struct SplitMixEngine {
+  using result_type = uint64_t;
+  uint64_t state = 0;
+  static constexpr result_type min() { return 0; }
+  static constexpr result_type max() { return ~uint64_t{0}; }
+  result_type operator()() { return SplitMix64(state += 0x9E3779B97F4A7C15ull); }
+};
+
 // One noise stream per (image, row): the same numbers whatever thread draws them.
-std::mt19937_64 RowStream(uint64_t seed, int image, int row) {
+SplitMixEngine RowStream(uint64_t seed, int image, int row) {
   uint64_t s = SplitMix64(seed ^ 0x50484F544F53494Dull);  // "PHOTOSIM": not the scan's streams
   s = SplitMix64(s ^ (static_cast<uint64_t>(image) + 1) * 0x9E3779B97F4A7C15ull);
   s = SplitMix64(s ^ (static_cast<uint64_t>(row) + 1) * 0x165667B19E3779F9ull);
-  return std::mt19937_64(s);
+  return SplitMixEngine{s};
 }
 
 std::string Num(double v) { return FormatNumber(v); }
@@ -60,19 +72,33 @@ std::string Num(double v) { return FormatNumber(v); }
 // value of a code here is bit for bit the one digitize::LoadPhoto returns for it.
 
 double SrgbEotf(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
-double SrgbOetf(double x) {
-  return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1.0 / 2.4) - 0.055;
-}
 
 struct SrgbCodec {
   int max_code = 0;
   std::vector<float> linear;  // per code
-  explicit SrgbCodec(int max) : max_code(max), linear(static_cast<size_t>(max) + 1) {
+  // bound[c]: the linear value from which code c is nearer than c - 1 (bound[0] = -inf,
+  // bound[max + 1] = +inf), i.e. code = round(OETF(x) * max) exactly when
+  // bound[code] <= x < bound[code + 1].
+  std::vector<double> bound;
+  explicit SrgbCodec(int max)
+      : max_code(max), linear(static_cast<size_t>(max) + 1), bound(static_cast<size_t>(max) + 2) {
     for (int i = 0; i <= max; ++i) linear[i] = static_cast<float>(SrgbEotf(double(i) / max));
+    bound[0] = -std::numeric_limits<double>::infinity();
+    for (int i = 1; i <= max; ++i) bound[i] = SrgbEotf((i - 0.5) / max);
+    bound[max + 1] = std::numeric_limits<double>::infinity();
   }
+  // round(OETF(clamp(x, 0, 1)) * max_code): a float estimate (powf is within ~1e-6 of the
+  // OETF, a hundredth of a 16-bit code), then one step each way to the exact code, without
+  // branches (they would be mispredicted half the time).
   int Encode(float x) const {
-    const double c = std::clamp(static_cast<double>(x), 0.0, 1.0);
-    return static_cast<int>(std::lround(SrgbOetf(c) * max_code));
+    if (!(x > 0.0f)) return 0;
+    if (x >= 1.0f) return max_code;
+    const float e = x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
+    int code = std::clamp(static_cast<int>(e * max_code + 0.5f), 0, max_code);
+    const double xd = x;
+    code += xd >= bound[code + 1];
+    code -= xd < bound[code];
+    return code;
   }
 };
 
@@ -126,8 +152,9 @@ View MakeView(const Painting& painting, const PhotoSimOptions& o, const Vec3d& e
   for (double X : {-mx, painting.width_mm + mx}) {
     for (double Y : {-my, painting.height_mm + my}) {
       const Vec3d p = view.camera_from_canvas.Apply(Vec3d(X, Y, 0));
-      DIGITIZE_CHECK(p.z() > 1e-6, "SimulatePhotoSet: the canvas (with its margin) reaches behind "
-                                   "a camera; increase camera_distance_mm or reduce the arc");
+      DIGITIZE_CHECK(p.z() > 1e-6,
+                     "SimulatePhotoSet: the canvas (with its margin) reaches behind "
+                     "a camera; increase camera_distance_mm or reduce the arc");
       half_u = std::max(half_u, std::abs(f * p.x() / p.z()));
       half_v = std::max(half_v, std::abs(f * p.y() / p.z()));
     }
@@ -153,8 +180,8 @@ Vec3d SpiralLight(const Painting& painting, const PhotoSimOptions& o, double s, 
   const double sin_el = std::clamp(sin_lo + u * (sin_hi - sin_lo), -1.0, 1.0);
   const double cos_el = std::sqrt(std::max(0.0, 1 - sin_el * sin_el));
   const double az = s * kGoldenAngleRad;
-  return CanvasCentre(painting) + o.light_distance_mm * Vec3d(cos_el * std::cos(az),
-                                                              cos_el * std::sin(az), sin_el);
+  return CanvasCentre(painting) +
+         o.light_distance_mm * Vec3d(cos_el * std::cos(az), cos_el * std::sin(az), sin_el);
 }
 
 // Held-out light j of m: between fitting lights (half-integer spiral positions, evenly spread)
@@ -167,12 +194,17 @@ double HeldOutSpiralPosition(int j, int m, int n) {
 // ---------------------------------------------------------------------------------------------
 // Rendering.
 
-// What a camera pixel sees (traced once per camera).
+// What a camera pixel sees, with everything that does not depend on the light (traced and
+// computed once per camera, then shared by all its lights).
 struct PixelHit {
-  Eigen::Vector3f p = Eigen::Vector3f::Zero();        // hit, canvas frame (mm)
-  Eigen::Vector3f n_shade = Eigen::Vector3f::Zero();  // canvas: interpolated analytic normal
-  Eigen::Vector3f n_geo = Eigen::Vector3f::Zero();    // geometric, facing the camera
-  int32_t texel = -1;                                 // canvas: nearest texel, y * w + x
+  Vec3f p = Vec3f::Zero();      // hit, canvas frame (mm)
+  Vec3f n_geo = Vec3f::Zero();  // geometric normal, facing the camera
+  // Canvas: the tangent frame of the interpolated analytic normal (frame_z = that normal) and
+  // the view direction in it.
+  Vec3f frame_x = Vec3f::Zero(), frame_y = Vec3f::Zero(), frame_z = Vec3f::Zero();
+  Vec3f v_local = Vec3f::Zero();
+  uint8_t material = 0;
+  bool faces_camera = false;  // canvas: n.v > 0 (else it renders black)
   Scene::Hit what = Scene::Hit::kNone;
 };
 
@@ -186,8 +218,8 @@ constexpr int kRetraces = 3;
 constexpr double kRetraceStepPx = 1e-3;
 
 void RetraceSlips(const Scene& scene, const View& view, const Mat3d& canvas_from_camera,
-                  float min_height_mm, const std::vector<Vec3d>& origins,
-                  std::vector<Vec3d>& dirs, std::vector<Scene::RayHit>& hits) {
+                  float min_height_mm, const std::vector<Vec3d>& origins, std::vector<Vec3d>& dirs,
+                  std::vector<Scene::RayHit>& hits) {
   const Painting& painting = scene.painting();
   constexpr double kTolMm = 1e-3;
   auto slipped = [&](size_t i) {
@@ -216,51 +248,61 @@ void RetraceSlips(const Scene& scene, const View& view, const Mat3d& canvas_from
   }
 }
 
-Grid<PixelHit> TracePrimary(const Scene& scene, const View& view) {
+Grid<PixelHit> TracePrimary(const Scene& scene, const View& view,
+                            const Grid<uint8_t>& material_index) {
   const Painting& painting = scene.painting();
-  const float min_height_mm = *std::min_element(painting.truth.height_mm.data.begin(),
-                                                painting.truth.height_mm.data.end());
+  const float min_height_mm =
+      *std::min_element(painting.truth.height_mm.data.begin(), painting.truth.height_mm.data.end());
   const HeightField& truth = painting.truth;
   const Grid<Vec3f>& normals = painting.normals;
   const int w = view.camera.width, h = view.camera.height;
   const Camera& cam = view.camera;
   const Mat3d canvas_from_camera = view.camera_from_canvas.rotation.transpose();
   Grid<PixelHit> hits(w, h, PixelHit{});
-  tbb::parallel_for(tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
-    std::vector<Vec3d> origins(static_cast<size_t>(w), view.eye_canvas), dirs(static_cast<size_t>(w));
-    std::vector<Scene::RayHit> row_hits;
-    for (int y = r.begin(); y < r.end(); ++y) {
-      for (int x = 0; x < w; ++x) {
-        dirs[x] = canvas_from_camera * Vec3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
-      }
-      scene.Intersect(origins, dirs, row_hits);
-      RetraceSlips(scene, view, canvas_from_camera, min_height_mm, origins, dirs, row_hits);
-      for (int x = 0; x < w; ++x) {
-        const Scene::RayHit& rh = row_hits[x];
-        PixelHit& out = hits(x, y);
-        out.what = rh.what;
-        if (rh.what == Scene::Hit::kNone) continue;
-        const Vec3d p = view.eye_canvas + rh.t * dirs[x].normalized();
-        out.p = p.cast<float>();
-        out.n_geo = rh.normal.cast<float>();
-        if (rh.what != Scene::Hit::kCanvas) continue;
-        // Nearest texel for the material; bilinear analytic normal for the shading.
-        const Eigen::Vector2d t = truth.TexelFromMm(p.x(), p.y());
-        const double tx = std::clamp(t.x(), 0.0, truth.width() - 1.0);
-        const double ty = std::clamp(t.y(), 0.0, truth.height() - 1.0);
-        const int nx = static_cast<int>(std::lround(tx)), ny = static_cast<int>(std::lround(ty));
-        out.texel = ny * truth.width() + nx;
-        const int x0 = std::min(static_cast<int>(tx), std::max(0, truth.width() - 2));
-        const int y0 = std::min(static_cast<int>(ty), std::max(0, truth.height() - 2));
-        const int x1 = std::min(x0 + 1, truth.width() - 1), y1 = std::min(y0 + 1, truth.height() - 1);
-        const float fx = static_cast<float>(tx - x0), fy = static_cast<float>(ty - y0);
-        Vec3f n = (1 - fy) * ((1 - fx) * normals(x0, y0) + fx * normals(x1, y0)) +
-                  fy * ((1 - fx) * normals(x0, y1) + fx * normals(x1, y1));
-        const float len = n.norm();
-        out.n_shade = len > 1e-12f ? Vec3f(n / len) : Vec3f(0, 0, 1);
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
+        std::vector<Vec3d> origins(static_cast<size_t>(w), view.eye_canvas),
+            dirs(static_cast<size_t>(w));
+        std::vector<Scene::RayHit> row_hits;
+        for (int y = r.begin(); y < r.end(); ++y) {
+          for (int x = 0; x < w; ++x) {
+            dirs[x] = canvas_from_camera * Vec3d((x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0);
+          }
+          scene.Intersect(origins, dirs, row_hits);
+          RetraceSlips(scene, view, canvas_from_camera, min_height_mm, origins, dirs, row_hits);
+          for (int x = 0; x < w; ++x) {
+            const Scene::RayHit& rh = row_hits[x];
+            PixelHit& out = hits(x, y);
+            out.what = rh.what;
+            if (rh.what == Scene::Hit::kNone) continue;
+            const Vec3d p = view.eye_canvas + rh.t * dirs[x].normalized();
+            out.p = p.cast<float>();
+            out.n_geo = rh.normal.cast<float>();
+            if (rh.what != Scene::Hit::kCanvas) continue;
+            // Nearest texel for the material; bilinear analytic normal for the shading.
+            const Eigen::Vector2d t = truth.TexelFromMm(p.x(), p.y());
+            const double tx = std::clamp(t.x(), 0.0, truth.width() - 1.0);
+            const double ty = std::clamp(t.y(), 0.0, truth.height() - 1.0);
+            const int nx = static_cast<int>(std::lround(tx)),
+                      ny = static_cast<int>(std::lround(ty));
+            out.material = material_index(nx, ny);
+            const int x0 = std::min(static_cast<int>(tx), std::max(0, truth.width() - 2));
+            const int y0 = std::min(static_cast<int>(ty), std::max(0, truth.height() - 2));
+            const int x1 = std::min(x0 + 1, truth.width() - 1),
+                      y1 = std::min(y0 + 1, truth.height() - 1);
+            const float fx = static_cast<float>(tx - x0), fy = static_cast<float>(ty - y0);
+            Vec3f n = (1 - fy) * ((1 - fx) * normals(x0, y0) + fx * normals(x1, y0)) +
+                      fy * ((1 - fx) * normals(x0, y1) + fx * normals(x1, y1));
+            const TangentFrame frame = MakeTangentFrame(n.cast<double>());
+            const Vec3d v = (view.eye_canvas - p).normalized();
+            out.frame_x = frame.x.cast<float>();
+            out.frame_y = frame.y.cast<float>();
+            out.frame_z = frame.z.cast<float>();
+            out.v_local = frame.ToLocal(v).cast<float>();
+            out.faces_camera = out.v_local.z() > 0;
+          }
+        }
+      });
   return hits;
 }
 
@@ -273,38 +315,32 @@ struct Job {
 };
 
 struct Shading {
-  const Painting* painting = nullptr;
   const std::vector<PaintMaterial>* materials = nullptr;
-  const Grid<uint8_t>* material_index = nullptr;
   float frame_brdf = 0;  // frame_albedo / pi
   float intensity = 0;   // grey point light, linear units x mm^2 x sr
 };
 
-// Radiance of a pixel (unshadowed); also n.l > 0 of the surface (for the shadow statistics).
-Vec3f Shade(const PixelHit& hit, const Vec3d& eye, const Vec3d& light, const Shading& s,
-            bool* lit_side) {
+// Radiance of a pixel (unshadowed); also whether the surface faces the light (n.l > 0) and the
+// camera, for the shadow statistics. Float: hit points are float already, and the light's
+// direction to ~1e-7 changes a k = 500 lobe by ~5e-5 of its value.
+Vec3f Shade(const PixelHit& hit, const Vec3f& light, const Shading& s, bool* lit_side) {
   *lit_side = false;
   if (hit.what == Scene::Hit::kNone) return Vec3f::Zero();
-  const Vec3d p = hit.p.cast<double>();
-  const Vec3d to_light = light - p;
-  const double d2 = to_light.squaredNorm();
-  const Vec3d l = to_light / std::sqrt(d2);
-  const float irradiance = static_cast<float>(s.intensity / d2);
+  const Vec3f to_light = light - hit.p;
+  const float d2 = to_light.squaredNorm();
+  const Vec3f l = to_light / std::sqrt(d2);
+  const float irradiance = s.intensity / d2;
   if (hit.what != Scene::Hit::kCanvas) {
-    const double cos_l = hit.n_geo.cast<double>().dot(l);
+    const float cos_l = hit.n_geo.dot(l);
     if (!(cos_l > 0)) return Vec3f::Zero();
     *lit_side = true;
-    return Vec3f::Constant(s.frame_brdf * static_cast<float>(cos_l) * irradiance);
+    return Vec3f::Constant(s.frame_brdf * cos_l * irradiance);
   }
-  const Vec3d n = hit.n_shade.cast<double>();
-  const Vec3d v = (eye - p).normalized();
-  const double cos_v = n.dot(v), cos_l = n.dot(l);
-  if (!(cos_v > 0) || !(cos_l > 0)) return Vec3f::Zero();
+  const float cos_l = hit.frame_z.dot(l);
+  if (!hit.faces_camera || !(cos_l > 0)) return Vec3f::Zero();
   *lit_side = true;
-  const TangentFrame frame = MakeTangentFrame(n);
-  const Vec3f v_local = frame.ToLocal(v).cast<float>(), l_local = frame.ToLocal(l).cast<float>();
-  const PaintMaterial& m = (*s.materials)[s.material_index->data[static_cast<size_t>(hit.texel)]];
-  return m.Evaluate(v_local, l_local) * (static_cast<float>(cos_l) * irradiance);
+  const Vec3f l_local(hit.frame_x.dot(l), hit.frame_y.dot(l), cos_l);
+  return (*s.materials)[hit.material].Evaluate(hit.v_local, l_local) * (cos_l * irradiance);
 }
 
 struct RenderCounts {
@@ -316,7 +352,8 @@ struct RenderCounts {
 // ---------------------------------------------------------------------------------------------
 
 Vec3f PaintMaterial::Evaluate(const Vec3f& v, const Vec3f& l) const {
-  return is_measured ? EvaluateMeasuredLafortune(measured, v, l) : EvaluateLafortune(lafortune, v, l);
+  return is_measured ? EvaluateMeasuredLafortune(measured, v, l)
+                     : EvaluateLafortune(lafortune, v, l);
 }
 
 std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
@@ -334,10 +371,14 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
       {"satin (vermilion)", {0.50f, 0.13f, 0.08f}, 0.08f, 6.0f, -1.0f, -1.0f},
       {"semi-gloss (green earth)", {0.16f, 0.30f, 0.17f}, 0.06f, 30.0f, -1.0f, -1.0f},
       {"gloss (ultramarine)", {0.07f, 0.09f, 0.33f}, 0.05f, 100.0f, -1.0f, -1.0f},
-      {"varnish (dark umber)", {0.07f, 0.05f, 0.035f}, 0.04f, 400.0f, -1.0f, -1.0f},
+      {"varnish (dark umber)", {0.09f, 0.065f, 0.05f}, 0.04f, 400.0f, -1.0f, -1.0f},
       // Anisotropic and off-specular: the lobe is narrower along the canvas X axis than along
       // Y, and its peak leans towards the normal (|c| < 1).
-      {"anisotropic off-specular (lead white)", {0.80f, 0.77f, 0.68f}, 0.06f, 20.0f, -0.95f,
+      {"anisotropic off-specular (lead white)",
+       {0.80f, 0.77f, 0.68f},
+       0.06f,
+       20.0f,
+       -0.95f,
        -0.55f},
   };
   std::vector<PaintMaterial> out;
@@ -378,9 +419,12 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
 
 const char* ToString(PhotoEncoding e) {
   switch (e) {
-    case PhotoEncoding::kSrgb8: return "srgb8";
-    case PhotoEncoding::kSrgb16: return "srgb16";
-    case PhotoEncoding::kLinearExr: return "exr";
+    case PhotoEncoding::kSrgb8:
+      return "srgb8";
+    case PhotoEncoding::kSrgb16:
+      return "srgb16";
+    case PhotoEncoding::kLinearExr:
+      return "exr";
   }
   return "?";
 }
@@ -390,7 +434,8 @@ Status PhotoSimOptions::Validate() const {
   auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
   if (cameras < 1 || cameras > 64)
     return fail("cameras must be in [1, 64], got " + std::to_string(cameras));
-  if (!in(camera_arc_deg, 0, 80)) return fail("camera_arc_deg must be in [0, 80], got " + Num(camera_arc_deg));
+  if (!in(camera_arc_deg, 0, 80))
+    return fail("camera_arc_deg must be in [0, 80], got " + Num(camera_arc_deg));
   if (!(in(camera_distance_mm, 0, 1e5) && camera_distance_mm > 0))
     return fail("camera_distance_mm must be in (0, 100000], got " + Num(camera_distance_mm));
   if (!(in(pixels_per_texel, 0, 16) && pixels_per_texel > 0))
@@ -411,12 +456,14 @@ Status PhotoSimOptions::Validate() const {
     return fail("held_out_lights must be in [0, 4096], got " + std::to_string(held_out_lights));
   if (!in(held_out_camera_deg, 0, 80))
     return fail("held_out_camera_deg must be in [0, 80], got " + Num(held_out_camera_deg));
-  if (!in(noise_sigma, 0, 1)) return fail("noise_sigma must be in [0, 1] (linear), got " + Num(noise_sigma));
+  if (!in(noise_sigma, 0, 1))
+    return fail("noise_sigma must be in [0, 1] (linear), got " + Num(noise_sigma));
   if (encoding != PhotoEncoding::kSrgb8 && encoding != PhotoEncoding::kSrgb16 &&
       encoding != PhotoEncoding::kLinearExr)
     return fail("encoding must be srgb8, srgb16 or exr, got " +
                 std::to_string(static_cast<int>(encoding)));
-  if (!in(frame_albedo, 0, 1)) return fail("frame_albedo must be in [0, 1], got " + Num(frame_albedo));
+  if (!in(frame_albedo, 0, 1))
+    return fail("frame_albedo must be in [0, 1], got " + Num(frame_albedo));
   return Status::Ok();
 }
 
@@ -487,24 +534,25 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
   const double dist = options.camera_distance_mm;
   std::vector<View> views;
   for (int c = 0; c < options.cameras; ++c) {
-    const double a = options.cameras == 1
-                         ? 0.0
-                         : (-options.camera_arc_deg +
-                            2 * options.camera_arc_deg * c / (options.cameras - 1)) * kDeg;
-    views.push_back(MakeView(painting, options,
-                             centre + dist * Vec3d(std::sin(a), 0, std::cos(a)), canvas_from_scan));
+    const double a =
+        options.cameras == 1
+            ? 0.0
+            : (-options.camera_arc_deg + 2 * options.camera_arc_deg * c / (options.cameras - 1)) *
+                  kDeg;
+    views.push_back(MakeView(painting, options, centre + dist * Vec3d(std::sin(a), 0, std::cos(a)),
+                             canvas_from_scan));
   }
   const int held_out_view = options.cameras;
   {
     const double a = options.held_out_camera_deg * kDeg;
-    views.push_back(MakeView(painting, options,
-                             centre + dist * Vec3d(0, std::sin(a), std::cos(a)), canvas_from_scan));
+    views.push_back(MakeView(painting, options, centre + dist * Vec3d(0, std::sin(a), std::cos(a)),
+                             canvas_from_scan));
   }
 
   // Lights, grey: a white Lambertian at the centre lit head-on reads white_level.
   const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
-  const float intensity = static_cast<float>(options.white_level * kPi *
-                                             options.light_distance_mm * options.light_distance_mm);
+  const float intensity = static_cast<float>(options.white_level * kPi * options.light_distance_mm *
+                                             options.light_distance_mm);
   auto make_light = [&](const Vec3d& p_canvas) {
     Light l;
     l.type = LightType::kPoint;
@@ -526,6 +574,15 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                                           ? ColourEncoding::kLinear
                                           : ColourEncoding::kSrgb;
   const char* ext = options.encoding == PhotoEncoding::kLinearExr ? "exr" : "png";
+  // Every pixel is written by the render loop below: no zero fill (0.3 s of one thread for 64
+  // megapixel images), the pages are touched first by the threads that render them.
+  auto unfilled = [](int w, int h) {
+    Grid<Vec3f> g;
+    g.width = w;
+    g.height = h;
+    g.data.resize(static_cast<size_t>(w) * h);  // Eigen vectors: left uninitialised
+    return g;
+  };
   auto name = [](const char* dir, int i, const char* e) {
     char buf[64];
     std::snprintf(buf, sizeof buf, "%s%03d.%s", dir, i, e);
@@ -541,7 +598,7 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
       photo.camera = views[c].camera;
       photo.light = make_light(fit_lights[j]);
       photo.encoding = fit_encoding;
-      photo.rgb = Grid<Vec3f>(photo.camera.width, photo.camera.height);
+      photo.rgb = unfilled(photo.camera.width, photo.camera.height);
       photo.flags = Grid<uint8_t>(photo.camera.width, photo.camera.height, 0);
       out.fit.photos.push_back(std::move(photo));
       jobs_of_view[c].push_back({c, fit_lights[j], false, i});
@@ -557,7 +614,7 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
       photo.camera = views[v].camera;
       photo.light = make_light(held_lights[j]);
       photo.encoding = ColourEncoding::kLinear;
-      photo.rgb = Grid<Vec3f>(photo.camera.width, photo.camera.height);
+      photo.rgb = unfilled(photo.camera.width, photo.camera.height);
       out.held_out.photos.push_back(std::move(photo));
       out.held_out_mask.emplace_back(photo.camera.width, photo.camera.height, 0);
       jobs_of_view[v].push_back({v, held_lights[j], true, i});
@@ -565,15 +622,14 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
   }
 
   Shading shading;
-  shading.painting = &painting;
   shading.materials = &out.materials;
-  shading.material_index = &out.material_index;
   shading.frame_brdf = static_cast<float>(options.frame_albedo / kPi);
   shading.intensity = intensity;
 
   // Progress over all rows of all images.
   size_t total_rows = 0;
-  for (size_t v = 0; v < views.size(); ++v) total_rows += jobs_of_view[v].size() * views[v].camera.height;
+  for (size_t v = 0; v < views.size(); ++v)
+    total_rows += jobs_of_view[v].size() * views[v].camera.height;
   std::atomic<size_t> rows_done{0};
   std::mutex progress_mutex;
   int last_percent = 0;
@@ -594,7 +650,7 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
     const std::vector<Job>& jobs = jobs_of_view[v];
     if (jobs.empty()) continue;
     const View& view = views[v];
-    const Grid<PixelHit> hits = TracePrimary(scene, view);
+    const Grid<PixelHit> hits = TracePrimary(scene, view, out.material_index);
     const int w = view.camera.width, h = view.camera.height;
     const int blocks = (h + kRowGrain - 1) / kRowGrain;
     tbb::parallel_for(
@@ -610,13 +666,15 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
             const Job& job = jobs[task / blocks];
             const int y0 = static_cast<int>(task % blocks) * kRowGrain;
             const int y1 = std::min(h, y0 + kRowGrain);
-            Photo& photo = job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
+            Photo& photo =
+                job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
+            const Vec3f light_f = job.light_canvas.cast<float>();
             size_t saturated = 0, canvas_lit = 0, shadowed = 0;
             for (int y = y0; y < y1; ++y) {
               const PixelHit* row = hits.Row(y);
               for (int x = 0; x < w; ++x) {
                 bool lit_side = false;
-                radiance[x] = Shade(row[x], view.eye_canvas, job.light_canvas, shading, &lit_side);
+                radiance[x] = Shade(row[x], light_f, shading, &lit_side);
                 lit[x] = lit_side;
               }
               if (options.shadows) {
@@ -627,7 +685,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                     max_t[x] = 0;
                     continue;
                   }
-                  origins[x] = (hit.p + hit.n_geo * static_cast<float>(kShadowOffsetMm)).cast<double>();
+                  origins[x] =
+                      (hit.p + hit.n_geo * static_cast<float>(kShadowOffsetMm)).cast<double>();
                   dirs[x] = job.light_canvas - origins[x];
                   max_t[x] = static_cast<float>(dirs[x].norm());
                 }
@@ -657,10 +716,11 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                 std::copy(radiance.begin(), radiance.end(), dst);
                 continue;
               }
-              for (int x = 0; x < w; ++x) canvas_lit += lit[x] && row[x].what == Scene::Hit::kCanvas;
+              for (int x = 0; x < w; ++x)
+                canvas_lit += lit[x] && row[x].what == Scene::Hit::kCanvas;
               // Fitting image: noise, then the encoding as a camera file would hold it.
               if (noisy) {
-                std::mt19937_64 rng = RowStream(options.seed, job.index, y);
+                SplitMixEngine rng = RowStream(options.seed, job.index, y);
                 std::normal_distribution<float> normal(0.0f, 1.0f);
                 for (int x = 0; x < w; ++x) {
                   for (int k = 0; k < 3; ++k) radiance[x][k] += sigma * normal(rng);
