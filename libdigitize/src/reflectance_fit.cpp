@@ -149,13 +149,14 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
   size_t lobe_texels = 0;
   const size_t tile = static_cast<size_t>(options.tile_texels);
   BrdfSamples samples;
+  SampleBuffers buffers;
   for (size_t begin = 0; begin < texels.size(); begin += tile) {
     const std::span<const uint32_t> part(texels.data() + begin,
                                          std::min(tile, texels.size() - begin));
     samples.samples.clear();
     samples.texel_begin.assign(1, 0);
     t0 = Clock::now();
-    GatherSamples(scene, part, options.samples, samples, report.samples);
+    GatherSamples(scene, part, options.samples, samples, report.samples, true, &buffers);
     report.seconds_samples += Since(t0);
 
     t0 = Clock::now();

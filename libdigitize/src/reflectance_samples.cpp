@@ -135,7 +135,7 @@ Status ValidateSampleScene(const SampleScene& scene) {
 
 void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
                    const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
-                   bool parallel) {
+                   bool parallel, SampleBuffers* buffers) {
   const HeightField& canvas = *scene.canvas;
   const Grid<Vec3f>& normals = *scene.normals;
   const std::vector<Photo>& photos = scene.photos->photos;
@@ -161,9 +161,15 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     geometry[t].frame = MakeTangentFrame(normals(x, y).cast<double>());
   }
 
-  // slot (t, i) holds photo i's sample of texel t when keep[t * n_photos + i].
-  std::vector<BrdfSample> slots(n_texels * n_photos);
-  std::vector<uint8_t> keep(n_texels * n_photos, 0);
+  // slot (i, t) holds photo i's sample of texel t when keep[i * n_texels + t]: photo-major, so
+  // each photo's task writes one contiguous run (texel-major made every write a cache miss).
+  SampleBuffers local_buffers;
+  SampleBuffers& b = buffers ? *buffers : local_buffers;
+  // Slots are written before they are read (keep says which): only grow them, never clear.
+  if (b.slots.size() < n_texels * n_photos) b.slots.resize(n_texels * n_photos);
+  b.keep.assign(n_texels * n_photos, 0);
+  std::vector<BrdfSample>& slots = b.slots;
+  std::vector<uint8_t>& keep = b.keep;
   std::mutex stats_mutex;
   stats.texels += n_texels;
 
@@ -215,7 +221,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
         ++local.black;
         continue;
       }
-      BrdfSample& s = slots[t * n_photos + i];
+      BrdfSample& s = slots[i * n_texels + t];
       s.view_dir = v_local.cast<float>();
       s.light_dir = l_local.cast<float>();
       s.radiance = pixel.rgb;
@@ -256,7 +262,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       } else if (shadowed[c]) {
         ++local.shadowed;
       } else {
-        keep[candidate[c] * n_photos + i] = 1;
+        keep[i * n_texels + candidate[c]] = 1;
         ++local.kept;
       }
     }
@@ -274,7 +280,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   for (size_t t = 0; t < n_texels; ++t) {
     texel_samples.clear();
     for (size_t i = 0; i < n_photos; ++i)
-      if (keep[t * n_photos + i]) texel_samples.push_back(slots[t * n_photos + i]);
+      if (keep[i * n_texels + t]) texel_samples.push_back(slots[i * n_texels + t]);
     out.AddTexel(texel_samples);
   }
 }

@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "digitize/brdf_fit.h"
 #include "digitize/core.h"
@@ -73,11 +74,18 @@ struct SampleScene {
 // behind it (the error names the calibration entry and file), a non-finite normal.
 Status ValidateSampleScene(const SampleScene& scene);
 
+// Scratch space GatherSamples can reuse from call to call (a tile of 32 k texels x 64 photos is
+// 100 MB that would otherwise be allocated and initialised per call).
+struct SampleBuffers {
+  std::vector<BrdfSample> slots;
+  std::vector<uint8_t> keep;
+};
+
 // Samples of `texels` (indices y * width + x, any order, none kOutside), texel by texel in that
 // order, APPENDED to `out` (one AddTexel per texel, possibly empty). Parallel over photos (TBB)
 // when `parallel`. Stats are added to *stats.
 void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
                    const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
-                   bool parallel = true);
+                   bool parallel = true, SampleBuffers* buffers = nullptr);
 
 }  // namespace digitize
