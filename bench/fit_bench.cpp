@@ -150,7 +150,7 @@ int main(int argc, char** argv) {
   (void)WriteReflectanceOutputs(dir / "fit", *fast, options, {"bench"});
   const double seconds_write = Since(t0);
   auto score = EvaluateHeldOut(canvas, normals, fast->maps, {}, truth.held_out, truth.held_out_mask);
-  Row whole = Describe("whole fit, fast, skip on", *fast, set->photos.size(), *score);
+  Row whole = Describe("whole fit: fast, skip", *fast, set->photos.size(), *score);
   whole.seconds_load = seconds_load;
   whole.seconds_write = seconds_write;
   whole.seconds_total = seconds_load + fast->report.seconds_total + seconds_write;
@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
   ReflectanceFitOptions no_skip = options;
   no_skip.samples.trace.skip_unblockable = false;
   auto traced = FitReflectance(canvas, normals, {}, *set, no_skip);
-  rows.push_back(Describe("fast, skip off", *traced, set->photos.size(),
+  rows.push_back(Describe("fast, no skip", *traced, set->photos.size(),
                           *EvaluateHeldOut(canvas, normals, traced->maps, {}, truth.held_out,
                                            truth.held_out_mask)));
   // 3. No shadow or visibility rays at all: what the rays buy in accuracy.
@@ -175,8 +175,8 @@ int main(int argc, char** argv) {
   const int n = std::min({crop_n, canvas.width(), canvas.height()});
   const Crop crop = MakeCrop(canvas, normals, RigidTransform{}, (canvas.width() - n) / 2,
                              (canvas.height() - n) / 2, n);
-  for (const auto& [name, method] : {std::pair{"crop, fast", BrdfFitMethod::kFast},
-                                     std::pair{"crop, ceres::Solve", BrdfFitMethod::kCeresReference}}) {
+  for (const auto& [name, method] : {std::pair{"crop: fast", BrdfFitMethod::kFast},
+                                     std::pair{"crop: ceres::Solve", BrdfFitMethod::kCeresReference}}) {
     ReflectanceFitOptions o = options;
     o.fit.method = method;
     auto r = FitReflectance(crop.field, crop.normals, crop.canvas_from_scan, *set, o);
@@ -207,7 +207,7 @@ int main(int argc, char** argv) {
     csv << "config,texels,photos,samples_kept,rays,rays_skipped,rays_traced,seconds_load,"
            "seconds_samples,seconds_fit,seconds_write,seconds_total,us_per_texel_fit,psnr_db,rmse\n";
     for (const Row& r : rows)
-      csv << r.config << "," << r.texels << "," << r.photos << "," << r.samples_kept << ","
+      csv << '"' << r.config << "\"," << r.texels << "," << r.photos << "," << r.samples_kept << ","
           << r.rays << "," << r.rays_skipped << "," << r.rays_traced << "," << r.seconds_load << ","
           << r.seconds_samples << "," << r.seconds_fit << "," << r.seconds_write << ","
           << r.seconds_total << "," << r.us_per_texel_fit << "," << r.psnr_db << "," << r.rmse

@@ -4,15 +4,18 @@ set datafile columnheaders
 set terminal pngcairo size 1400,520 font "DejaVu Sans,11" noenhanced
 set output "docs/bench_fit.png"
 set multiplot layout 1,2
-set title "Fit time per texel vs held-out relighting error (2 cores)"
+set title "Fit time per texel vs held-out PSNR, same 128x128 crop (2 cores)"
 set xlabel "fit time per texel (us, wall, 2 threads)"
 set ylabel "held-out PSNR (dB)"
 set logscale x
 set grid
 set key bottom right
-plot "docs/bench_fit.csv" using 13:14:1 with labels point pt 7 ps 1.5 offset 1,0.6 left notitle
+set yrange [30:45]
+set xrange [1:500]
+plot "docs/bench_fit.csv" every ::3::4 using 13:14:1 with labels point pt 7 ps 1.5 offset 1,0.6 left notitle
 unset logscale
-set title "Where the time of a whole fit goes"
+set autoscale
+set title "Where the time goes, 1 Mtexel x 64 photos"
 set style data histograms
 set style histogram rowstacked
 set style fill solid 0.8 border -1
