@@ -449,10 +449,19 @@ TEST_F(CalibrationTest, HostileFiles) {
     doc_["images"][1]["path"] = "junk.png";
     ExpectError(Read(), {"calib.json", "images[1]", "junk.png", "unreadable"});
   }
-  {  // 4 channels
-    WriteImage("rgba.png", kW, kH, 4, OIIO::TypeDesc::UINT8, std::vector<uint8_t>(kW * kH * 4, 9));
+  {  // 2 channels (grey + alpha) is not a photo this reads
+    WriteImage("ga.png", kW, kH, 2, OIIO::TypeDesc::UINT8, std::vector<uint8_t>(kW * kH * 2, 9));
+    doc_["images"][1]["path"] = "ga.png";
+    ExpectError(Read(), {"images[1]", "ga.png", "channels"});
+  }
+  {  // RGBA (a PNG saved with alpha) is read as its RGB; alpha is dropped
+    std::vector<uint8_t> rgba(kW * kH * 4, 9);
+    for (size_t i = 3; i < rgba.size(); i += 4) rgba[i] = 0;  // fully transparent: ignored
+    WriteImage("rgba.png", kW, kH, 4, OIIO::TypeDesc::UINT8, rgba);
     doc_["images"][1]["path"] = "rgba.png";
-    ExpectError(Read(), {"images[1]", "rgba.png", "channels"});
+    auto set = Read();
+    ASSERT_TRUE(set.ok()) << set.error().message;
+    EXPECT_NEAR(set->photos[1].rgb(2, 3).y(), SrgbToLinear(9.0f / 255.0f), 1e-7);
   }
   doc_["images"][1]["path"] = "b.png";
   {

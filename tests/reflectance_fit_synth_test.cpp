@@ -135,8 +135,11 @@ TEST(ReflectanceFitSynth, StressMaterials) {
   const auto regions = synth::MeasureReflectanceAccuracy(c.fit.maps, c.painting.truth, {},
                                                          c.photos, c.painting);
   std::printf("%s", synth::FormatReflectanceAccuracy(regions).c_str());
-  for (const auto& r : regions)
-    if (r.name == "k = 1") EXPECT_LT(r.rho_d_rel_median, 0.1);
+  for (const auto& r : regions) {
+    if (r.name == "k = 1") {
+      EXPECT_LT(r.rho_d_rel_median, 0.1);
+    }
+  }
 }
 
 // A measured 3-lobe paint (bluepaint) is not in the fitted family: reported (measured 42.0 dB at

@@ -287,8 +287,11 @@ TEST(ReflectanceFit, ShadowRaysRejectExactlyTheAnalyticShadow) {
           << "x " << x << " skip " << skip;
     EXPECT_GE(stats.shadowed, 8u);
     EXPECT_LE(stats.shadowed, 9u);
-    if (skip) EXPECT_GT(stats.light_rays.skipped, 0u);
-    else EXPECT_EQ(stats.light_rays.skipped, 0u);
+    if (skip) {
+      EXPECT_GT(stats.light_rays.skipped, 0u);
+    } else {
+      EXPECT_EQ(stats.light_rays.skipped, 0u);
+    }
   }
 }
 

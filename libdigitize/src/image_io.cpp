@@ -179,7 +179,11 @@ Result<std::unique_ptr<OIIO::ImageInput>> OpenImage(const fs::path& path) {
   if (fs::is_regular_file(file_status) && fs::file_size(path, ec) == 0 && !ec) {
     return Error{name + ": empty file (0 bytes)"};
   }
-  auto in = OIIO::ImageInput::open(name);
+  // Colour as stored: OpenImageIO would otherwise premultiply a PNG's RGB by its alpha, and a
+  // photo saved with a transparent alpha would read black.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(name, &config);
   if (!in) {
     return Error{name + ": unreadable, not an image OpenImageIO can open (" +
                  OneLine(OIIO::geterror()) + ")"};
