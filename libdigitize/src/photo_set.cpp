@@ -436,7 +436,7 @@ ColourEncoding ParseEncoding(const Fields& f) {
   Fail(f.At("encoding") + " must be \"srgb\", \"linear\" or \"auto\", got \"" + e + "\"");
 }
 
-PhotoSet ParseCalibration(const fs::path& json_path, const std::string& text) {
+PhotoSet ParseCalibration(const fs::path& json_path, std::string_view text) {
   const std::string file = json_path.string();
   json doc;
   try {
@@ -517,16 +517,10 @@ bool ParseDouble(std::string_view s, double* out) {
   return ec == std::errc() && end == s.data() + s.size();
 }
 
-struct LpEntry {
-  std::string name;  // as written
-  Vec3d direction;
-  int line = 0;
-};
-
-std::vector<LpEntry> ParseLp(const fs::path& lp_path, const std::string& text) {
+std::vector<RtiLightEntry> ParseLp(const fs::path& lp_path, std::string_view text) {
   const std::string file = lp_path.string();
   const auto at = [&](int line) { return file + ", line " + std::to_string(line) + ": "; };
-  std::vector<LpEntry> entries;
+  std::vector<RtiLightEntry> entries;
   long long count = -1;
   int count_line = 0;
   int line_no = 0;
@@ -565,30 +559,30 @@ std::vector<LpEntry> ParseLp(const fs::path& lp_path, const std::string& text) {
       Fail(at(line_no) + "more entries than the " + std::to_string(count) +
            " images announced on line " + std::to_string(count_line));
     }
-    LpEntry e;
+    RtiLightEntry e;
     e.line = line_no;
     const size_t n = tokens.size();
     // The file name is everything before the three numbers (it may contain spaces).
     std::string_view name = line.substr(0, tokens[n - 3].begin);
     while (!name.empty() && (name.back() == ' ' || name.back() == '\t')) name.remove_suffix(1);
     name.remove_prefix(tokens[0].begin);
-    e.name = std::string(name);
+    e.image = std::string(name);
     static const char* kAxis[3] = {"x", "y", "z"};
     for (int k = 0; k < 3; ++k) {
       const std::string_view t = tokens[n - 3 + k].text;
       double v = 0;
       if (!ParseDouble(t, &v)) {
         Fail(at(line_no) + "\"" + std::string(t) + "\" is not a number (" + kAxis[k] + " of " +
-             e.name + ")");
+             e.image + ")");
       }
       if (!std::isfinite(v)) {
         Fail(at(line_no) + "\"" + std::string(t) + "\" is not finite (" + kAxis[k] + " of " +
-             e.name + ")");
+             e.image + ")");
       }
       e.direction[k] = v;
     }
     const double norm = e.direction.norm();
-    if (!(norm > kMinDirectionNorm)) Fail(at(line_no) + "zero light direction for " + e.name);
+    if (!(norm > kMinDirectionNorm)) Fail(at(line_no) + "zero light direction for " + e.image);
     e.direction /= norm;
     entries.push_back(std::move(e));
   }
@@ -824,17 +818,31 @@ Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options,
   return Status::Ok();
 }
 
+Result<PhotoSet> ParseCalibrationText(std::string_view text, const fs::path& source) {
+  try {
+    return ParseCalibration(source, text);
+  } catch (const BadInput& bad) {
+    return Error{bad.message};
+  }
+}
+
+Result<std::vector<RtiLightEntry>> ParseRtiLightsText(std::string_view text,
+                                                      const fs::path& source) {
+  try {
+    return ParseLp(source, text);
+  } catch (const BadInput& bad) {
+    return Error{bad.message};
+  }
+}
+
 Result<PhotoSet> ReadCalibration(const fs::path& json_path, const PhotoSetOptions& options,
                                  const ProgressCallback& progress) {
   if (Status s = options.Validate(); !s) return Error{s.message()};
   auto text = ReadTextFile(json_path, "calibration file");
   if (!text) return text.error();
-  PhotoSet set;
-  try {
-    set = ParseCalibration(json_path, *text);
-  } catch (const BadInput& bad) {
-    return Error{bad.message};
-  }
+  auto parsed = ParseCalibrationText(*text, json_path);
+  if (!parsed) return parsed.error();
+  PhotoSet set = std::move(*parsed);
   if (Status s = ProbeAll(set); !s) return Error{s.message()};
   if (options.load_pixels) {
     if (Status s = LoadPhotoPixels(set, options, progress); !s) return Error{s.message()};
@@ -847,12 +855,8 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
   if (Status s = options.Validate(); !s) return Error{s.message()};
   auto text = ReadTextFile(lp_path, ".lp light file");
   if (!text) return text.error();
-  std::vector<LpEntry> entries;
-  try {
-    entries = ParseLp(lp_path, *text);
-  } catch (const BadInput& bad) {
-    return Error{bad.message};
-  }
+  auto entries = ParseRtiLightsText(*text, lp_path);
+  if (!entries) return entries.error();
   const fs::path dir = lp_path.parent_path();
   PhotoSet set;
   set.source = lp_path;
@@ -861,10 +865,10 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
 
   // The first image fixes the grid; the camera looks straight down at the canvas centre.
   int width = 0, height = 0;
-  for (const LpEntry& e : entries) {
+  for (const RtiLightEntry& e : *entries) {
     Photo photo;
     photo.entry = lp_path.string() + ", line " + std::to_string(e.line);
-    photo.path = ResolveLpImage(dir, e.name);
+    photo.path = ResolveLpImage(dir, e.image);
     auto header = ReadHeader(photo.path);
     if (!header) return Error{photo.entry + ": " + header.error().message};
     if (width == 0) {
