@@ -441,7 +441,8 @@ PhotoSet ParseCalibration(const fs::path& json_path, std::string_view text) {
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // parse_error, and also out_of_range for a number beyond double ("1e400"): both bad input.
     Fail(file + ": not valid JSON (" + e.what() + ")");
   }
   if (!doc.is_object()) Fail(file + ": the top level must be an object");
@@ -479,6 +480,8 @@ PhotoSet ParseCalibration(const fs::path& json_path, std::string_view text) {
     photo.entry = f.where();
     const std::string rel = f.String("path");
     if (rel.empty()) Fail(f.At("path") + " is empty");
+    // A path with a NUL would be cut short by the OS and open another file than the one named.
+    if (rel.find('\0') != std::string::npos) Fail(f.At("path") + " contains a NUL character");
     photo.path = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
     photo.camera = ParseRef<Camera>(f, "camera", cameras, "cameras", ParseCamera);
     photo.light = ParseRef<Light>(f, "light", lights, "lights", ParseLight);
@@ -562,11 +565,15 @@ std::vector<RtiLightEntry> ParseLp(const fs::path& lp_path, std::string_view tex
     RtiLightEntry e;
     e.line = line_no;
     const size_t n = tokens.size();
-    // The file name is everything before the three numbers (it may contain spaces).
-    std::string_view name = line.substr(0, tokens[n - 3].begin);
-    while (!name.empty() && (name.back() == ' ' || name.back() == '\t')) name.remove_suffix(1);
-    name.remove_prefix(tokens[0].begin);
-    e.image = std::string(name);
+    // The file name is everything before the three numbers (it may contain spaces): from its
+    // first token to the end of its last, so no separator (\r, \v, \f too) sticks to it.
+    const Token& last = tokens[n - 4];
+    e.image = std::string(
+        line.substr(tokens[0].begin, last.begin + last.text.size() - tokens[0].begin));
+    // A name with a NUL would be cut short by the OS and open another file than the one named.
+    if (e.image.find('\0') != std::string::npos) {
+      Fail(at(line_no) + "the file name contains a NUL character");
+    }
     static const char* kAxis[3] = {"x", "y", "z"};
     for (int k = 0; k < 3; ++k) {
       const std::string_view t = tokens[n - 3 + k].text;
