@@ -137,5 +137,23 @@ TEST(FuzzCorpusTest, ReadersReportTheParsersErrors) {
   }
 }
 
+// Found while fuzzing: error messages printed the offending value with json::dump, which recurses
+// once per nesting level, so a few hundred KB of nested arrays overflowed the stack. The value is
+// now shown shortened; the message names the file and the key and stays short.
+TEST(FuzzCorpusTest, DeeplyNestedValueIsAnErrorNotAStackOverflow) {
+  constexpr int kDepth = 200000;  // 400 KB; the stack overflowed from ~30000 under ASan
+  const std::string text =
+      R"({"format":"digitize.calibration","version":1,"images":[{"path":"a.png","light":0,)"
+      R"("camera":{"width":4,"height":4,"fx":)" +
+      std::string(kDepth, '[') + std::string(kDepth, ']') + "}}]}";
+  const auto set = ParseCalibrationText(text, "deep/calib.json");
+  ASSERT_FALSE(set.ok());
+  const std::string& message = set.error().message;
+  EXPECT_NE(message.find("deep/calib.json: images[0].camera.fx must be a number, got [[[..."),
+            std::string::npos)
+      << message;
+  EXPECT_LT(message.size(), 200u) << message;
+}
+
 }  // namespace
 }  // namespace digitize

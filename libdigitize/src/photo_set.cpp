@@ -247,6 +247,46 @@ Converted Convert(const FloatImage& image, ColourEncoding encoding, const PhotoS
 // ---------------------------------------------------------------------------------------------
 // Calibration JSON.
 
+// A JSON value as an error message shows it: at most kShownDepth levels deep and about
+// kShownChars characters. Not json::dump: a hostile file can be huge, and dump recurses once per
+// nesting level (a 400 KB file of nested arrays overflowed the stack).
+constexpr int kShownDepth = 2;
+constexpr size_t kShownChars = 80;
+
+void ShowInto(const json& v, int depth, std::string& out) {
+  if (out.size() > kShownChars) return;
+  if (!v.is_structured()) {
+    out += v.dump();  // a scalar: no recursion (a long string is cut below)
+    return;
+  }
+  const bool array = v.is_array();
+  if (v.empty() || depth == 0) {
+    out += v.empty() ? (array ? "[]" : "{}") : (array ? "[...]" : "{...}");
+    return;
+  }
+  out += array ? '[' : '{';
+  bool first = true;
+  for (auto it = v.begin(); it != v.end() && out.size() <= kShownChars; ++it) {
+    if (!first) out += ", ";
+    first = false;
+    if (!array) out += json(it.key()).dump() + ": ";
+    ShowInto(*it, depth - 1, out);
+  }
+  out += array ? ']' : '}';
+}
+
+std::string Show(const json& v) {
+  std::string out;
+  ShowInto(v, kShownDepth, out);
+  if (out.size() > kShownChars) {
+    size_t cut = kShownChars;
+    while (cut > 0 && (static_cast<unsigned char>(out[cut]) & 0xC0) == 0x80) --cut;  // UTF-8
+    out.resize(cut);
+    out += "...";
+  }
+  return out;
+}
+
 // Reading one JSON object, with the key path of every value for the error messages.
 class Fields {
  public:
@@ -263,20 +303,20 @@ class Fields {
   double Number(const std::string& key) const { return NumberOf(Get(key), At(key)); }
   int Integer(const std::string& key) const {
     const json& v = Get(key);
-    if (!v.is_number_integer()) Fail(At(key) + " must be an integer, got " + v.dump());
+    if (!v.is_number_integer()) Fail(At(key) + " must be an integer, got " + Show(v));
     const auto i = v.get<int64_t>();
-    if (i < -kMaxImageSide || i > kMaxImageSide) Fail(At(key) + " is out of range: " + v.dump());
+    if (i < -kMaxImageSide || i > kMaxImageSide) Fail(At(key) + " is out of range: " + Show(v));
     return static_cast<int>(i);
   }
   std::string String(const std::string& key) const {
     const json& v = Get(key);
-    if (!v.is_string()) Fail(At(key) + " must be a string, got " + v.dump());
+    if (!v.is_string()) Fail(At(key) + " must be a string, got " + Show(v));
     return v.get<std::string>();
   }
   Vec3d Vector3(const std::string& key) const {
     const json& v = Get(key);
     if (!v.is_array() || v.size() != 3)
-      Fail(At(key) + " must be an array of 3 numbers, got " + v.dump());
+      Fail(At(key) + " must be an array of 3 numbers, got " + Show(v));
     Vec3d out;
     for (int i = 0; i < 3; ++i) out[i] = NumberOf(v[i], At(key) + "[" + std::to_string(i) + "]");
     return out;
@@ -306,7 +346,7 @@ class Fields {
 
   static std::string TypeName(const json& v) { return v.type_name(); }
   static double NumberOf(const json& v, const std::string& where) {
-    if (!v.is_number()) Fail(where + " must be a number, got " + v.dump());
+    if (!v.is_number()) Fail(where + " must be a number, got " + Show(v));
     const double d = v.get<double>();
     if (!std::isfinite(d)) Fail(where + " is not finite");
     return d;
@@ -322,12 +362,12 @@ RigidTransform ParseTransform(const Fields& f) {
   const std::string rwhere = f.At("rotation");
   const json& r = f.Get("rotation");
   if (!r.is_array() || r.size() != 3)
-    Fail(rwhere + " must be 3 rows of 3 numbers, got " + r.dump());
+    Fail(rwhere + " must be 3 rows of 3 numbers, got " + Show(r));
   Mat3d R;
   for (int i = 0; i < 3; ++i) {
     if (!r[i].is_array() || r[i].size() != 3) {
       Fail(rwhere + " must be 3 rows of 3 numbers, row " + std::to_string(i) + " is " +
-           r[i].dump());
+           Show(r[i]));
     }
     for (int j = 0; j < 3; ++j) {
       R(i, j) = Fields::NumberOf(r[i][j],
@@ -450,7 +490,7 @@ PhotoSet ParseCalibration(const fs::path& json_path, std::string_view text) {
   if (!top.Has("format") || !top.Get("format").is_string() ||
       top.String("format") != "digitize.calibration") {
     Fail(file + ": not a calibration file (\"format\" must be \"digitize.calibration\", got " +
-         (top.Has("format") ? top.Get("format").dump() : std::string("nothing")) + ")");
+         (top.Has("format") ? Show(top.Get("format")) : std::string("nothing")) + ")");
   }
   if (!top.Has("version") || !top.Get("version").is_number_integer()) {
     Fail(file + ": \"version\" must be an integer (this build reads version 1)");
