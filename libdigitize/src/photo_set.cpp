@@ -428,8 +428,10 @@ Light ParseLight(const Fields& f) {
     f.OnlyKeys({"type", "direction", "irradiance"});
     light.type = LightType::kDirectional;
     const Vec3d d = f.Vector3("direction");
-    if (!(d.norm() > kMinDirectionNorm)) Fail(f.At("direction") + " is a zero vector");
-    light.direction = d.normalized();
+    // stableNorm: finite components whose squares overflow (1e200) are still a direction.
+    const double norm = d.stableNorm();
+    if (!(norm > kMinDirectionNorm)) Fail(f.At("direction") + " is a zero vector");
+    light.direction = d / norm;
     light.irradiance = f.Rgb("irradiance");
   } else {
     Fail(f.At("type") + " must be \"point\" or \"directional\", got \"" + type + "\"");
@@ -628,7 +630,9 @@ std::vector<RtiLightEntry> ParseLp(const fs::path& lp_path, std::string_view tex
       }
       e.direction[k] = v;
     }
-    const double norm = e.direction.norm();
+    // stableNorm: finite components whose squares overflow (1e200) are still a direction; norm()
+    // gave inf and a zero "unit" vector (found by fuzz_lp).
+    const double norm = e.direction.stableNorm();
     if (!(norm > kMinDirectionNorm)) Fail(at(line_no) + "zero light direction for " + e.image);
     e.direction /= norm;
     entries.push_back(std::move(e));
