@@ -9,3 +9,5 @@ gnuplot bench/plot.gp && echo "wrote docs/bench_preprocess.png"
 ./build/bin/brdf_fit_bench --csv-dir=docs | tee docs/bench_brdf_fit.txt
 ./build/bin/fit_bench --csv-dir=docs | tee docs/bench_fit.txt
 gnuplot bench/plot_fit.gp && echo "wrote docs/bench_fit.png"
+./build/bin/pack_bench --csv-dir=docs | tee docs/bench_pack.txt
+gnuplot bench/plot_pack.gp && echo "wrote docs/bench_pack.png"
