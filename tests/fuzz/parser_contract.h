@@ -1,5 +1,5 @@
-// The contract of the text parsers (photo_set.h: ParseCalibrationText, ParseRtiLightsText) on ANY
-// input, checked on every input by the fuzz targets (tests/fuzz/fuzz_*.cpp) and on every corpus
+// The contract of the parsers of user files (photo_set.h: ParseCalibrationText,
+// ParseRtiLightsText; pack.h: ReadPack, InspectPack) on ANY input, checked on every input by the fuzz targets (tests/fuzz/fuzz_*.cpp) and on every corpus
 // file by the normal test suite (tests/fuzz_corpus_test.cpp):
 //   - no crash, no exception, no sanitizer report (the callers run under ASan+UBSan);
 //   - bad input: an Error whose message names the source file;
@@ -14,6 +14,7 @@
 #include <string>
 #include <string_view>
 
+#include "digitize/pack.h"
 #include "digitize/photo_set.h"
 
 namespace digitize::fuzz {
@@ -104,6 +105,31 @@ inline std::string CheckLpText(std::string_view text, const std::filesystem::pat
     if ((a.direction - b.direction).norm() > kUnitTolerance) {
       return "written back, the direction of \"" + a.image + "\" changes";
     }
+  }
+  return "";
+}
+
+// A pack file: InspectPack reads the header only, ReadPack everything; a pack that reads must
+// inspect too (the header is a subset), agree with the header, and Validate.
+inline std::string CheckPackFile(const std::filesystem::path& path) {
+  const Result<PackSummary> summary = InspectPack(path);
+  if (!summary.ok()) {
+    if (std::string broken = ErrorNamesSource(summary.error().message, path); !broken.empty()) {
+      return "InspectPack: " + broken;
+    }
+  }
+  const Result<Pack> pack = ReadPack(path);
+  if (!pack.ok()) {
+    if (std::string broken = ErrorNamesSource(pack.error().message, path); !broken.empty()) {
+      return "ReadPack: " + broken;
+    }
+    return "";
+  }
+  if (!summary.ok()) return "ReadPack accepts what InspectPack refuses: " + summary.error().message;
+  if (Status s = pack->Validate(); !s.ok()) return "ReadPack returned a pack that does not Validate: " + s.message();
+  if (pack->width() != summary->width || pack->height() != summary->height ||
+      pack->boxes.size() != summary->box_count || pack->cell_px != summary->cell_px) {
+    return "ReadPack and InspectPack disagree on the size, the cell size or the box count";
   }
   return "";
 }
