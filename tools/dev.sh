@@ -72,7 +72,7 @@ run_fuzzers() {
     if UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
        LSAN_OPTIONS=suppressions="$root/tests/fuzz/lsan.supp" \
        "build-fuzz/fuzz/$target" "${args[@]}" "$dir/corpus" > "$dir/log" 2>&1; then
-      grep -a -E '^#[0-9]+ .*cov: ' "$dir/log" | tail -n 1 || true
+      grep -a -E '^#[0-9]+[[:space:]].*cov: ' "$dir/log" | tail -n 1 || true
       grep -a -E 'stat::(number_of_executed_units|average_exec_per_sec)' "$dir/log" | tr '\n' ' ' || true
       echo
     else
