@@ -1,9 +1,9 @@
 // The fuzz corpus (tests/fuzz/corpus/) replayed in the normal build, so that it keeps guarding the
-// parsers (calibration JSON, .lp, texture packs) without clang: every file must keep the contract of tests/fuzz/parser_contract.h (no
-// crash; an error naming the source, or a result that holds the readers' promises), and the file
-// readers must name the file in their errors too. File names say what a seed is meant to be:
-// valid_* must parse, bad_* must be refused; crash_* (reproducers of fixed bugs) and anything
-// else only have to keep the contract.
+// parsers (calibration JSON, .lp, texture packs) without clang: every file must keep the contract
+// of tests/fuzz/parser_contract.h (no crash; an error naming the source, or a result that holds the
+// readers' promises), and the file readers must name the file in their errors too. File names say
+// what a seed is meant to be: valid_* must parse, bad_* must be refused; crash_* (reproducers of
+// fixed bugs) and anything else only have to keep the contract.
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 

@@ -1,6 +1,7 @@
 // The contract of the parsers of user files (photo_set.h: ParseCalibrationText,
-// ParseRtiLightsText; pack.h: ReadPack, InspectPack) on ANY input, checked on every input by the fuzz targets (tests/fuzz/fuzz_*.cpp) and on every corpus
-// file by the normal test suite (tests/fuzz_corpus_test.cpp):
+// ParseRtiLightsText; pack.h: ReadPack, InspectPack) on ANY input, checked on every input by the
+// fuzz targets (tests/fuzz/fuzz_*.cpp) and on every corpus file by the normal test suite
+// (tests/fuzz_corpus_test.cpp):
 //   - no crash, no exception, no sanitizer report (the callers run under ASan+UBSan);
 //   - bad input: an Error whose message names the source file;
 //   - success: a result that holds the readers' promises (photos non-empty, cameras and lights
@@ -53,15 +54,15 @@ inline std::string CheckCalibrationText(std::string_view text,
     if (Status s = photo.light.Validate(photo.entry); !s) return what + "light: " + s.message();
     const Mat3d& r = photo.camera.camera_from_scan.rotation;
     const double off = (r.transpose() * r - Mat3d::Identity()).norm();
-    if (!(off < kSnappedRotationTolerance && std::abs(r.determinant() - 1) < kSnappedRotationTolerance)) {
+    if (!(off < kSnappedRotationTolerance &&
+          std::abs(r.determinant() - 1) < kSnappedRotationTolerance)) {
       return what + "rotation not snapped onto SO(3): |R^T R - I| = " + std::to_string(off);
     }
     // The geometry helpers must be total on any camera the parser accepts.
     const Status sees = CheckCameraSeesCanvas(photo.camera, RigidTransform{},
                                               Eigen::Vector2d(200.0, 100.0), photo.entry);
     if (!sees.ok() && sees.message().rfind(photo.entry, 0) != 0) {
-      return what + "CheckCameraSeesCanvas error does not start with the entry: " +
-             sees.message();
+      return what + "CheckCameraSeesCanvas error does not start with the entry: " + sees.message();
     }
   }
   return "";
@@ -90,8 +91,8 @@ inline std::string CheckLpText(std::string_view text, const std::filesystem::pat
       return what + "direction not unit: |d| = " + std::to_string(e.direction.norm());
     }
     char numbers[96];
-    std::snprintf(numbers, sizeof numbers, " %.17g %.17g %.17g\n", e.direction.x(),
-                  e.direction.y(), e.direction.z());
+    std::snprintf(numbers, sizeof numbers, " %.17g %.17g %.17g\n", e.direction.x(), e.direction.y(),
+                  e.direction.z());
     again += e.image + numbers;
   }
   // Round trip: the entries written back as a .lp file read as the same entries.
@@ -126,7 +127,8 @@ inline std::string CheckPackFile(const std::filesystem::path& path) {
     return "";
   }
   if (!summary.ok()) return "ReadPack accepts what InspectPack refuses: " + summary.error().message;
-  if (Status s = pack->Validate(); !s.ok()) return "ReadPack returned a pack that does not Validate: " + s.message();
+  if (Status s = pack->Validate(); !s.ok())
+    return "ReadPack returned a pack that does not Validate: " + s.message();
   if (pack->width() != summary->width || pack->height() != summary->height ||
       pack->boxes.size() != summary->box_count || pack->cell_px != summary->cell_px) {
     return "ReadPack and InspectPack disagree on the size, the cell size or the box count";
