@@ -250,6 +250,27 @@ TEST_F(CliTest, PackRunInspectVerify) {
   EXPECT_EQ(mismatch.exit_code, 1);
   EXPECT_NE(mismatch.text.find("another canvas"), std::string::npos) << mismatch.text;
   EXPECT_FALSE(fs::exists(Path("m.pack.exr")));
+  // Killed mid-write (SIGKILL at many moments): the pack is the old one or the new one, never a
+  // mix or a torso -- the writer renames a finished temporary file into place.
+  {
+    const std::string target = Path("k.pack.exr");
+    fs::copy_file(Path("q.pack.exr"), target);
+    const auto old_size = fs::file_size(target);
+    int old_seen = 0, new_seen = 0;
+    for (int delay_ms : {0, 20, 40, 80, 120, 160, 240, 320, 480, 640}) {
+      const std::string cmd = std::string(DIGITIZE_CLI) + " pack --canvas " + Path("c") + " --fit " +
+                              Path("f") + " --out " + target + " > /dev/null 2>&1 & pid=$!; sleep " +
+                              std::to_string(delay_ms / 1000.0) + "; kill -9 $pid 2>/dev/null; wait $pid";
+      (void)std::system(cmd.c_str());
+      ASSERT_TRUE(fs::exists(target)) << "after a kill at " << delay_ms << " ms";
+      Output v = RunCli("verify " + target);
+      ASSERT_EQ(v.exit_code, 0) << "after a kill at " << delay_ms << " ms: " << v.text;
+      (fs::file_size(target) == old_size ? old_seen : new_seen)++;
+      fs::copy_file(Path("q.pack.exr"), target, fs::copy_options::overwrite_existing);
+    }
+    std::printf("killed pack writes: %d left the old pack, %d finished\n", old_seen, new_seen);
+  }
+
   // A bad quantisation option names itself.
   Output bits = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
                        Path("b.pack.exr") + " --quantised --rho-bits 12");
