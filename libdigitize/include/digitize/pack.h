@@ -76,10 +76,11 @@ struct Pack {
 // Mantissa bits kept per channel group in kQuantised mode (half has 10). Relative error of a
 // kept value: at most 2^-(bits+1) (round to nearest). The state/status channel is never quantised.
 struct PackQuantisation {
-  int height_bits = 10;  // keep height exact: relief mapping magnifies height errors at grazing views
-  int normal_bits = 6;
-  int rho_bits = 5;
-  int lobe_bits = 6;     // cx, cy, k
+  // Defaults: <= 10 bytes per texel at <= 1 dB relighting loss (docs/benchmarks.md, "Packs").
+  int height_bits = 8;   // 2^-9 relative: 5 um at 2.4 mm of relief, under any scanner's noise
+  int normal_bits = 5;   // nx, ny
+  int rho_bits = 4;      // rho_d, rho_s: 3 % relative
+  int lobe_bits = 6;     // cx, cy, k: kept finer, a glossy lobe (k ~ 500) magnifies its errors
   Status Validate() const;  // each in [0, 10]
 };
 
