@@ -77,6 +77,11 @@ run_fuzzers() {
       echo
     else
       tail -n 80 "$dir/log"
+      for f in "$dir"/crash-* "$dir"/leak-* "$dir"/timeout-* "$dir"/oom-*; do
+        # In CI the scratch folder is gone afterwards: print small reproducers (base64 -d).
+        [ -f "$f" ] && [ "$(stat -c %s "$f")" -le 65536 ] &&
+          { echo "== $(basename "$f") (base64):"; base64 -w 0 "$f"; echo; }
+      done
       echo "== fuzz $target FAILED: log and reproducer in $dir (fix the bug, then add the" \
            "reproducer to tests/fuzz/corpus/$target/ as crash_<what>)"
       failed=1
