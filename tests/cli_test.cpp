@@ -269,6 +269,10 @@ TEST_F(CliTest, PackRunInspectVerify) {
       fs::copy_file(Path("q.pack.exr"), target, fs::copy_options::overwrite_existing);
     }
     std::printf("killed pack writes: %d left the old pack, %d finished\n", old_seen, new_seen);
+    // The next complete write clears the temporaries the killed writers left.
+    ASSERT_EQ(RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + target).exit_code, 0);
+    for (const auto& e : fs::directory_iterator(dir_))
+      EXPECT_EQ(e.path().filename().string().find(".k.pack.exr.tmp-"), std::string::npos) << e.path();
   }
 
   // A bad quantisation option names itself.

@@ -2,7 +2,11 @@
 #include "digitize/image_io.h"
 
 #include <OpenImageIO/imageio.h>
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
 
 #include <atomic>
 #include <exception>
@@ -34,6 +38,25 @@ fs::path TempPathFor(const fs::path& path) {
   const std::string temp_name = "." + name + ".tmp-" + std::to_string(::getpid()) + "-" +
                                 std::to_string(counter.fetch_add(1)) + path.extension().string();
   return path.parent_path() / temp_name;
+}
+
+// A writer killed mid-write (SIGKILL, power loss) leaves its temporary file behind; the next
+// write of the same target removes those whose process is gone. Files of a live writer stay.
+void RemoveStaleTemporaries(const fs::path& path) {
+  const std::string prefix = "." + path.filename().string() + ".tmp-";
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string rest = name.substr(prefix.size());  // "<pid>-<n><ext>"
+    char* after = nullptr;
+    const long pid = std::strtol(rest.c_str(), &after, 10);
+    if (pid <= 0 || after == rest.c_str() || *after != '-') continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or unknown
+    std::error_code rm;
+    fs::remove(it->path(), rm);
+  }
 }
 
 // Writes interleaved pixels of one type through the OIIO writer named by `format`.
@@ -117,6 +140,7 @@ Status WriteAtomically(const fs::path& path,
       status = Error{path.string() + ": cannot move the finished file into place: " + ec.message()};
   }
   if (!status.ok()) fs::remove(temp, ec);  // best effort; the error already says what failed
+  RemoveStaleTemporaries(path);
   return status;
 }
 
