@@ -113,7 +113,8 @@ double MeanAbsDiff(const Grid<Vec3f>& a, const Grid<Vec3f>& b) {
   return sum / (3.0 * a.data.size());
 }
 
-void ExpectPlausible(const Grid<Vec3f>& img, const std::string& what) {
+// Not blank: at least min_lit of the pixels lit (> 0.01) and a mean above 0.02 x min_lit / 0.1.
+void ExpectPlausible(const Grid<Vec3f>& img, const std::string& what, double min_lit = 0.1) {
   size_t lit = 0;
   double sum = 0;
   for (const Vec3f& c : img.data) {
@@ -122,8 +123,8 @@ void ExpectPlausible(const Grid<Vec3f>& img, const std::string& what) {
     lit += c.maxCoeff() > 0.01f;
     sum += c.sum();
   }
-  EXPECT_GT(lit, img.data.size() / 10) << what << ": blank image";
-  EXPECT_GT(sum / (3.0 * img.data.size()), 0.02) << what << ": nearly black";
+  EXPECT_GT(double(lit), min_lit * img.data.size()) << what << ": blank image";
+  EXPECT_GT(sum / (3.0 * img.data.size()), 0.2 * min_lit) << what << ": nearly black";
 }
 
 // Writes a screenshot when DIGITIZE_VIEWER_SHOTS names a folder (to look at them).
@@ -169,28 +170,42 @@ TEST(ViewerTest, EveryTechniqueRendersAPlausibleImage) {
   }
 }
 
-// Image error of every mode against the Embree reference at the paper's six views. Thresholds:
-// hybrid+adaptive >= 35 dB (the bar); the mesh and relief-everywhere modes sample the
-// same surface as the reference and must reach it too; bump-only at grazing is allowed to fail
-// it (its parallax error is what the boxes are for) but must stay an image of the painting
-// (>= 20 dB).
+// Image error of every mode against the Embree reference at the paper's six views, on 4 x 4
+// box-filtered images (scene_setup.h: point samples at grazing views measure aliasing, not the
+// renderer); the point-sampled PSNR is printed too. Thresholds: hybrid+adaptive >= 35 dB (the
+// issue's bar), and so must be every mode that draws the relief (mesh, relief everywhere,
+// hybrid, screen-space error); bump only may fail it at grazing views (its parallax error is what
+// the boxes are for) but stays an image of the painting (>= 20 dB).
 TEST(ViewerTest, MatchesEmbreeReferenceAtPaperViews) {
   REQUIRE_GL();
+  const int ss = kCompareSupersampling;
   for (const PaperView& pv : AllPaperViews()) {
     const ViewCamera v = View(pv.distance, pv.angle);
     const RelitImage ref = RenderReference(*Get().tracer, Get().pack, v, Get().light, false);
+    const RelitImage ref_ss =
+        RenderReference(*Get().tracer, Get().pack, Supersampled(v, ss), Get().light, false);
+    const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
+    const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
     MaybeSave(ref.rgb, pv.Name() + "-reference");
     for (Technique t : kAllTechniques) {
       const Grid<Vec3f> img = Render(v, Options(t));
-      const double psnr = Psnr(img, ref);
+      // Half the pixels that see the canvas in the reference must be lit.
+      const double canvas_share =
+          double(std::count(ref.mask.data.begin(), ref.mask.data.end(), 1)) / ref.mask.size();
+      ExpectPlausible(img, pv.Name() + " " + ToString(t), 0.5 * canvas_share);
+      const double psnr_point = Psnr(img, ref);
+      const Grid<Vec3f> aa = Downsample(Render(Supersampled(v, ss), Options(t)), ss);
+      const ImageComparison c = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak);
+      EXPECT_GT(c.pixels, size_t(500)) << "too few canvas pixels compared";
       MaybeSave(img, pv.Name() + "-" + ToString(t));
       Grid<Vec3f> diff(kW, kH);
       for (size_t i = 0; i < diff.data.size(); ++i)
         diff.data[i] = (img.data[i] - ref.rgb.data[i]).cwiseAbs() * 4.0f;
       MaybeSave(diff, pv.Name() + "-" + ToString(t) + "-diff4");
-      std::printf("%-15s %-13s %6.2f dB\n", pv.Name().c_str(), ToString(t), psnr);
-      const bool bump_like = t == Technique::kBump;
-      EXPECT_GE(psnr, bump_like ? 20.0 : 35.0) << pv.Name() << " " << ToString(t);
+      std::printf("%-15s %-13s point %6.2f dB, 4x4 box-filtered %6.2f dB\n", pv.Name().c_str(),
+                  ToString(t), psnr_point, c.psnr_db);
+      const bool bump_only = t == Technique::kBump;
+      EXPECT_GE(c.psnr_db, bump_only ? 20.0 : 35.0) << pv.Name() << " " << ToString(t);
     }
   }
 }

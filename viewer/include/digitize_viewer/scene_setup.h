@@ -28,4 +28,22 @@ inline constexpr double kPsnrPeak = 1.0;
 RelitImage RenderReference(const HeightFieldTracer& tracer, const Pack& pack,
                            const ViewCamera& view, const Light& light, bool shadows);
 
+// The reference mask without its outline: pixels whose 8 neighbours also see the canvas. On a
+// silhouette pixel both renderers point-sample a step edge, and a sub-pixel difference in where
+// the edge falls (the rasteriser snaps vertices to 1/256 px; the bump plane's outline is the
+// slab's, not the height field's) flips the whole pixel: at the far grazing view the canvas is a
+// strip a few pixels high and its outline alone sets the PSNR. Comparisons report both masks.
+Grid<uint8_t> InteriorMask(const Grid<uint8_t>& mask);
+
+// Antialiased comparison. Both renderers point-sample one ray per pixel; at grazing views a
+// pixel spans tens of texels along the canvas, so a sub-pixel difference picks another texel and
+// the per-pixel error is aliasing noise, not a rendering error. The comparison that matters for
+// a display is between box-filtered images: render both at s x the size (Supersampled: same eye,
+// target and fov, s x the pixels) and average s x s blocks (Downsample); compare the pixels whose
+// s x s reference samples all see the canvas (DownsampleMask).
+ViewCamera Supersampled(const ViewCamera& view, int s);
+Grid<Vec3f> Downsample(const Grid<Vec3f>& image, int s);
+Grid<uint8_t> DownsampleMask(const Grid<uint8_t>& mask, int s);
+inline constexpr int kCompareSupersampling = 4;
+
 }  // namespace digitize::viewer
