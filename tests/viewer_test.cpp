@@ -13,10 +13,13 @@
 #include <filesystem>
 #include <memory>
 
+#include <unistd.h>
+
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
+#include "digitize_viewer/gallery.h"
 #include "digitize_viewer/gl_context.h"
 #include "digitize_viewer/renderer.h"
 #include "digitize_viewer/scene_setup.h"
@@ -302,6 +305,123 @@ TEST(ViewerTest, InconsistentPackIsReported) {
   tiny.field.height_mm = Grid<float>(1, 1);
   EXPECT_FALSE(Get().renderer->AddPainting(tiny, "tiny").ok());
   EXPECT_EQ(Get().renderer->painting_count(), 1);
+}
+
+// Self-shadowing: with shadows on, the viewer's relief modes match the reference with shadows on
+// (same 35 dB bar on 4 x 4 box-filtered images) and are darker than without (shadows appear).
+TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {
+  REQUIRE_GL();
+  const int ss = kCompareSupersampling;
+  // A low light (20 deg above the canvas, from -X) so that the impasto casts long shadows.
+  const Pack& p = Get().pack;
+  Light light;
+  light.type = LightType::kPoint;
+  const double d = 300, e = 20 * 3.14159265358979323846 / 180;
+  light.position_mm = Vec3d(p.width_mm() / 2, p.height_mm() / 2, 0) +
+                      d * Vec3d(-std::cos(e), 0, std::sin(e));
+  light.intensity = Vec3f::Constant(float(3.14159265358979323846 * d * d));
+  for (ViewAngle a : {ViewAngle::kFace, ViewAngle::kGrazing}) {
+    const ViewCamera v = View(ViewDistance::kClose, a);
+    const RelitImage ref_ss =
+        RenderReference(*Get().tracer, Get().pack, Supersampled(v, ss), light, true);
+    ASSERT_GT(ref_ss.shadowed_pixels, 0u);
+    const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
+    const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
+    for (Technique t : {Technique::kReliefEverywhere, Technique::kHybridAdaptive}) {
+      RenderOptions o = Options(t);
+      o.shadows = true;
+      const Grid<Vec3f> lit = Get().renderer->Render(Supersampled(v, ss), {light}, o).rgb;
+      const Grid<Vec3f> aa = Downsample(lit, ss);
+      const double psnr = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak).psnr_db;
+      const Grid<Vec3f> unlit = Get().renderer->Render(Supersampled(v, ss), {light}, Options(t)).rgb;
+      const double psnr_off = CompareImages(Downsample(unlit, ss), ref_aa, mask_aa, kPsnrPeak).psnr_db;
+      std::printf("close-%s %-9s vs reference with shadows: on %6.2f dB, off %6.2f dB (4x4)\n",
+                  a == ViewAngle::kFace ? "face" : "grazing", ToString(t), psnr, psnr_off);
+      EXPECT_GE(psnr, 35.0);
+      EXPECT_GT(psnr, psnr_off + 3.0);  // the shadows are there, and in the right places
+    }
+  }
+}
+
+std::filesystem::path TempDir() {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("digitize_viewer_test_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+TEST(ViewerTest, CameraPathReadsAndRejectsBadFiles) {
+  const auto dir = TempDir();
+  const auto good = dir / "path.json";
+  ASSERT_TRUE(WriteTextFile(good, R"({"format": "digitize.camera_path", "version": 1,
+    "width": 64, "height": 48, "frames": [
+      {"eye": [0, 0, 1600], "target": [0, 1000, 1500]},
+      {"eye": [100, 0, 1600], "target": [0, 1000, 1500], "up": [0, 0, 1]}]})").ok());
+  auto path = ReadCameraPath(good);
+  ASSERT_TRUE(path.ok()) << path.error().message;
+  ASSERT_EQ(path->size(), 2u);
+  EXPECT_EQ((*path)[1].width, 64);
+  const auto bad = dir / "bad.json";
+  ASSERT_TRUE(WriteTextFile(bad, R"({"format": "digitize.camera_path", "version": 1,
+    "frames": [{"eye": [0, 0, 0], "target": [0, 0, 0]}]})").ok());
+  auto e = ReadCameraPath(bad);
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().message.find("bad.json: frames[0]"), std::string::npos) << e.error().message;
+  EXPECT_FALSE(ReadCameraPath(dir / "missing.json").ok());
+  ASSERT_TRUE(WriteTextFile(bad, "{not json").ok());
+  EXPECT_FALSE(ReadCameraPath(bad).ok());
+  std::filesystem::remove_all(dir);
+}
+
+// A pack file that does not exist or is not a pack: an error naming it, nothing thrown.
+TEST(ViewerTest, PackThatFailsToLoadIsReported) {
+  const auto dir = TempDir();
+  const auto junk = dir / "junk.pack.exr";
+  ASSERT_TRUE(WriteTextFile(junk, "not an EXR").ok());
+  for (const auto& p : {dir / "missing.pack.exr", junk}) {
+    auto pack = LoadPackForViewer(p);
+    ASSERT_FALSE(pack.ok());
+    EXPECT_NE(pack.error().message.find(p.filename().string()), std::string::npos)
+        << pack.error().message;
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// The gallery: paintings at their physical size on the back wall, facing into the room.
+TEST(ViewerTest, GalleryHangsPaintingsFacingTheRoom) {
+  const Gallery g = MakeGallery({Eigen::Vector2d(400, 300), Eigen::Vector2d(600, 800)});
+  ASSERT_EQ(g.world_from_canvas.size(), 2u);
+  ASSERT_EQ(g.lights.size(), 2u);
+  for (const RigidTransform& t : g.world_from_canvas) {
+    EXPECT_NEAR(t.rotation.determinant(), 1.0, 1e-12);
+    const Vec3d normal = t.ApplyToDirection(Vec3d::UnitZ());
+    EXPECT_NEAR(normal.y(), -1.0, 1e-12);  // into the room
+    const Vec3d corner = t.Apply(Vec3d(0, 0, 0));
+    EXPECT_GT(corner.x(), 0);
+    EXPECT_LT(corner.x(), g.width_mm);
+    EXPECT_GT(corner.z(), 0);
+  }
+  // Side by side, not overlapping.
+  EXPECT_GT(g.world_from_canvas[1].translation.x(), g.world_from_canvas[0].translation.x() + 400);
+}
+
+// The headless gallery screenshot (what `digitize demo` ends with) shows the painting.
+TEST(ViewerTest, GalleryScreenshotIsWritten) {
+  REQUIRE_GL();
+  const auto dir = TempDir();
+  GalleryShotOptions shot;
+  shot.width = 160;
+  shot.height = 90;
+  const auto png = dir / "gallery.png";
+  const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, png, {}, shot);
+  ASSERT_TRUE(s.ok()) << s.message();
+  auto img = ReadImage(png);
+  ASSERT_TRUE(img.ok()) << img.error().message;
+  EXPECT_EQ(img->width, 160);
+  // Not blank: the painting and the room give a spread of values.
+  const auto [lo, hi] = std::minmax_element(img->pixels.begin(), img->pixels.end());
+  EXPECT_GT(*hi - *lo, 0.3f);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -172,6 +172,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     options.eps_max = std::max(emax, emin + 1e-4f);
     options.max_error_px = px;
     ImGui::SliderInt("bump parallax steps", &options.bump_parallax_iterations, 0, 8);
+    ImGui::Checkbox("relief self-shadowing", &options.shadows);
     ImGui::Checkbox("box overlay", &options.show_boxes);
     ImGui::Checkbox("alpha heat map", &options.alpha_heatmap);
     ImGui::SliderFloat("ambient", &exposure_ambient, 0.0f, 0.5f);

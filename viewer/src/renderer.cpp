@@ -531,6 +531,13 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glProgramUniform1f(prog, glGetUniformLocation(prog, "u_delta0"), float(p.delta0_mm));
       glProgramUniform1i(prog, glGetUniformLocation(prog, "u_heatmap"),
                          options.alpha_heatmap ? 1 : 0);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_shadows"), options.shadows ? 1 : 0);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_max_height"),
+                         float(p.max_height_mm) + 1e-3f);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_shadow_step_texels"),
+                         float(options.linear_step_texels));
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_shadow_max_steps"),
+                         options.max_linear_steps);
       set_lights(prog, canvas_from_world);
     };
     stats.boxes_total += int(p.boxes.size());

@@ -16,6 +16,7 @@
 //   - v = towards the eye from P, l = towards each point light from P, E = I / |light - P|^2,
 //     radiance = sum over lights of f_r(v, l) max(0, n.l) E  (0 where n.v <= 0), plus
 //     `ambient` x rho_d (0 by default: the reference has no ambient term);
+//   - with `shadows`, a light whose ray from P is blocked by the height field contributes 0;
 //   - output: linear radiance (RGBA32F target), no tone mapping.
 // Techniques differ only in P:
 //   kBump: P = (xy, h(xy)) where xy is where the view ray meets the plane z = delta0 (the view and
@@ -84,6 +85,10 @@ struct RenderOptions {
   // (delta0 above it): framed face view 21 -> 54 dB against the reference (docs/benchmarks.md).
   int bump_parallax_iterations = 4;
   double ambient = 0;               // ambient radiance factor x rho_d (gallery look; 0 = none)
+  // Relief self-shadowing: per shading point and light, a march through the height field towards
+  // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
+  // Off by default, as in the paper; RenderRelit with shadows on is its reference.
+  bool shadows = false;
   // Debug views (the gallery's panel).
   bool alpha_heatmap = false;  // colour relief fragments by their box's alpha (blue 0 .. red 1),
                                // the bump plane dark grey
