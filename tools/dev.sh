@@ -15,6 +15,8 @@ packages=(
   libeigen3-dev libopencv-dev libceres-dev libopenimageio-dev openimageio-tools
   libembree-dev libcgal-dev libopenmesh-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
+  # viewer (issue 5): GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
+  libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
 )
 
 install_packages() {
@@ -65,7 +67,10 @@ case "$cmd" in
     # Sanitizers: RelWithDebInfo keeps the suite fast enough; halt on the first UBSan report.
     configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_SANITIZE=ON -DDIGITIZE_BUILD_BENCH=OFF
     cmake --build build-asan -j "$jobs"
+    # LSan: Mesa / LLVM / EGL keep driver-lifetime allocations (suppressions name those
+    # libraries only, never our code).
     ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+      LSAN_OPTIONS=suppressions="$root/tools/lsan_mesa.supp":print_suppressions=0 \
       DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan"
     ;;
   bench)
