@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "digitize/image_io.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "digitize_viewer/gallery.h"
@@ -42,8 +43,11 @@ struct Walker {  // walk-through camera: position, yaw / pitch (rad), world Z up
   }
 };
 
+// max_frames > 0: close after that many frames, first writing the window (panel included) to
+// window_shot when given -- how the windowed path is checked under xvfb-run.
 int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
-              std::vector<std::string> errors, RenderOptions options) {
+              std::vector<std::string> errors, RenderOptions options, int max_frames,
+              const std::string& window_shot) {
   if (!glfwInit()) {
     std::fprintf(stderr, "digitize-viewer: GLFW cannot initialise (no display?)\n");
     return 1;
@@ -89,6 +93,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   double frame_ms = 0;
   FrameStats stats;
   int technique = int(options.technique);
+  int frame = 0;
   float exposure_ambient = float(options.ambient);
 
   while (!glfwWindowShouldClose(window)) {
@@ -154,6 +159,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
+    ImGui::SetNextWindowSize(ImVec2(440, 620), ImGuiCond_FirstUseEver);
     ImGui::Begin("digitize viewer");
     ImGui::Text("%.1f ms/frame (%.0f Hz)", frame_ms, 1000.0 / std::max(frame_ms, 1e-3));
     ImGui::Text("boxes drawn %d of %d (%d blended)", stats.boxes_drawn, stats.boxes_total,
@@ -191,6 +197,21 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui::End();
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    if (max_frames > 0 && ++frame >= max_frames) {
+      if (!window_shot.empty()) {
+        Grid<std::array<uint8_t, 3>> img(w, h);
+        std::vector<uint8_t> rgb(size_t(w) * h * 3);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glReadBuffer(GL_BACK);
+        glReadPixels(0, 0, w, h, GL_RGB, GL_UNSIGNED_BYTE, rgb.data());
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) img(x, y)[c] = rgb[(size_t(h - 1 - y) * w + x) * 3 + c];
+        if (Status s = WritePngRgb8(window_shot, img); !s.ok())
+          std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
+      }
+      glfwSetWindowShouldClose(window, 1);
+    }
     glfwSwapBuffers(window);
   }
   renderer->reset();
@@ -208,13 +229,16 @@ int main(int argc, char** argv) {
   CLI::App app{"digitize-viewer: packs in a virtual gallery (OpenGL 4.5)"};
   std::vector<std::string> paths;
   bool synthetic = false;
-  std::string technique = "adaptive", screenshot, camera_path, size = "1280x720";
+  std::string technique = "adaptive", screenshot, camera_path, size = "1280x720", window_shot;
+  int window_frames = 0;
   app.add_option("packs", paths, "texture packs (.pack.exr)");
   app.add_flag("--synthetic", synthetic, "also hang a synthetic painting (ground-truth pack)");
   app.add_option("--technique", technique, "mesh, relief, bump, hybrid, adaptive, screen-error");
   app.add_option("--screenshot", screenshot, "render headless into this PNG and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
+  app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
+  app.add_option("--window-shot", window_shot, "window: write the last frame (panel included) here");
   CLI11_PARSE(app, argc, argv);
 
   RenderOptions options;
@@ -273,5 +297,5 @@ int main(int argc, char** argv) {
                 packs.size(), errors.size());
     return errors.empty() ? 0 : 1;
   }
-  return RunWindow(packs, errors, options);
+  return RunWindow(packs, errors, options, window_frames, window_shot);
 }
