@@ -55,7 +55,7 @@ class CliTest : public ::testing::Test {
 TEST_F(CliTest, HelpForEveryCommand) {
   Output top = RunCli("--help");
   EXPECT_EQ(top.exit_code, 0);
-  for (const char* cmd : {"synth", "preprocess", "fit", "demo"}) {
+  for (const char* cmd : {"synth", "preprocess", "fit", "pack", "run", "inspect", "verify", "demo"}) {
     EXPECT_NE(top.text.find(cmd), std::string::npos) << cmd;
     Output sub = RunCli(std::string(cmd) + " --help");
     EXPECT_EQ(sub.exit_code, 0) << cmd;
@@ -159,6 +159,124 @@ TEST_F(CliTest, DemoPrintsAccuracyAndWritesOutputs) {
   for (const char* f : {"fit/rho_d.exr", "fit/rho_s.exr", "fit/lobe.exr", "fit/fit_error.exr",
                         "fit/fit_status.png", "fit/report.json", "photos/calib.json"})
     EXPECT_TRUE(fs::exists(Path(std::string("demo/") + f))) << f;
+  // Issue 4: the demo ends with packs, judged from the files: size and PSNR from the pack.
+  EXPECT_NE(out.text.find("bytes/texel"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("painting.pack.exr"), std::string::npos) << out.text;
+  for (const char* f : {"painting.pack.exr", "painting.q.pack.exr"}) {
+    ASSERT_TRUE(fs::exists(Path(std::string("demo/") + f))) << f;
+    Output verify = RunCli("verify " + Path(std::string("demo/") + f));
+    EXPECT_EQ(verify.exit_code, 0) << verify.text;
+  }
+}
+
+// Reads `inspect --json` output.
+nlohmann::json InspectJson(const std::string& pack) {
+  Output out = RunCli("inspect --json " + pack);
+  EXPECT_EQ(out.exit_code, 0) << out.text;
+  auto doc = nlohmann::json::parse(out.text, nullptr, false);
+  EXPECT_FALSE(doc.is_discarded()) << out.text;
+  return doc;
+}
+
+// synth --photos -> preprocess -> fit -> pack -> inspect / verify; `run` in one go; and the
+// refusals a keeper of packs meets: a damaged pack, a pack of another file, mismatched folders.
+TEST_F(CliTest, PackRunInspectVerify) {
+  Output synth = RunCli("synth --out " + Path("s") +
+                        " --resolution 128 --scan-size 160 160 --photos --lights 16 --seed 7");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
+  Output fit = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
+                      " --out " + Path("f"));
+  ASSERT_EQ(fit.exit_code, 0) << fit.text;
+
+  Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("p.pack.exr"));
+  ASSERT_EQ(pack.exit_code, 0) << pack.text;
+  EXPECT_NE(pack.text.find("bytes/texel"), std::string::npos) << pack.text;
+  Output q = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                    Path("q.pack.exr") + " --quantised --rho-bits 4");
+  ASSERT_EQ(q.exit_code, 0) << q.text;
+
+  const auto j = InspectJson(Path("p.pack.exr"));
+  EXPECT_EQ(j.value("format", ""), "digitize.pack");
+  EXPECT_EQ(j.value("encoding", ""), "half");
+  EXPECT_EQ(j.value("raw_bytes_per_texel", 0), 26);
+  EXPECT_LT(j.value("bytes_per_texel", 99.0), 26.0);
+  EXPECT_GT(j["provenance"]["inputs"].size(), 8u);  // every file of both folders, hashed
+  EXPECT_NE(j["provenance"].value("fit_brief", "").find("converged"), std::string::npos);
+  EXPECT_TRUE(j["provenance"]["options"].contains("fit"));
+  const auto jq = InspectJson(Path("q.pack.exr"));
+  EXPECT_EQ(jq.value("encoding", ""), "quantised");
+  EXPECT_EQ(jq["mantissa_bits"].value("rho", -1), 4);
+  EXPECT_LT(jq.value("file_bytes", 0), j.value("file_bytes", 0));
+  Output text = RunCli("inspect " + Path("p.pack.exr"));
+  EXPECT_EQ(text.exit_code, 0);
+  EXPECT_NE(text.text.find("sha1"), std::string::npos) << text.text;
+
+  Output verify = RunCli("verify " + Path("p.pack.exr"));
+  EXPECT_EQ(verify.exit_code, 0) << verify.text;
+  EXPECT_NE(verify.text.find("valid"), std::string::npos) << verify.text;
+
+  // One go: scan + photos -> pack, with held-out PSNR from the written pack.
+  Output run = RunCli("run " + Path("s/scan.exr") + " --photos " + Path("s/photos/calib.json") +
+                      " --held-out " + Path("s/photos/held_out/calib.json") + " --out " +
+                      Path("r.pack.exr") + " --work " + Path("w"));
+  ASSERT_EQ(run.exit_code, 0) << run.text;
+  EXPECT_NE(run.text.find("from the pack: held-out PSNR"), std::string::npos) << run.text;
+  EXPECT_TRUE(fs::exists(Path("w/canvas/height.exr")));
+  EXPECT_TRUE(fs::exists(Path("w/fit/rho_d.exr")));
+  EXPECT_EQ(RunCli("verify " + Path("r.pack.exr")).exit_code, 0);
+  const auto jr = InspectJson(Path("r.pack.exr"));
+  EXPECT_GE(jr["provenance"]["inputs"].size(), 18u);  // scan + calibration + 16 photos
+
+  // A damaged pack: verify and inspect fail, naming the file.
+  {
+    std::ifstream in(Path("p.pack.exr"), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    bytes.resize(bytes.size() / 2);
+    std::ofstream(Path("half.pack.exr"), std::ios::binary) << bytes;
+  }
+  Output damaged = RunCli("verify " + Path("half.pack.exr"));
+  EXPECT_EQ(damaged.exit_code, 1);
+  EXPECT_NE(damaged.text.find("half.pack.exr"), std::string::npos) << damaged.text;
+  Output not_pack = RunCli("verify " + Path("c/height.exr"));
+  EXPECT_EQ(not_pack.exit_code, 1);
+  EXPECT_NE(not_pack.text.find("height.exr"), std::string::npos) << not_pack.text;
+  EXPECT_EQ(RunCli("inspect " + Path("nothing.pack.exr")).exit_code, 1);
+
+  // A fit folder from another canvas: refused, nothing written.
+  ASSERT_EQ(RunCli("synth --out " + Path("s2") + " --resolution 96 --scan-size 120 120").exit_code, 0);
+  ASSERT_EQ(RunCli("preprocess " + Path("s2/scan.exr") + " --out " + Path("c2")).exit_code, 0);
+  Output mismatch = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("m.pack.exr"));
+  EXPECT_EQ(mismatch.exit_code, 1);
+  EXPECT_NE(mismatch.text.find("another canvas"), std::string::npos) << mismatch.text;
+  EXPECT_FALSE(fs::exists(Path("m.pack.exr")));
+  // Killed mid-write (SIGKILL at many moments): the pack is the old one or the new one, never a
+  // mix or a torso -- the writer renames a finished temporary file into place.
+  {
+    const std::string target = Path("k.pack.exr");
+    fs::copy_file(Path("q.pack.exr"), target);
+    const auto old_size = fs::file_size(target);
+    int old_seen = 0, new_seen = 0;
+    for (int delay_ms : {0, 20, 40, 80, 120, 160, 240, 320, 480, 640}) {
+      const std::string cmd = std::string(DIGITIZE_CLI) + " pack --canvas " + Path("c") + " --fit " +
+                              Path("f") + " --out " + target + " > /dev/null 2>&1 & pid=$!; sleep " +
+                              std::to_string(delay_ms / 1000.0) + "; kill -9 $pid 2>/dev/null; wait $pid";
+      (void)std::system(cmd.c_str());
+      ASSERT_TRUE(fs::exists(target)) << "after a kill at " << delay_ms << " ms";
+      Output v = RunCli("verify " + target);
+      ASSERT_EQ(v.exit_code, 0) << "after a kill at " << delay_ms << " ms: " << v.text;
+      (fs::file_size(target) == old_size ? old_seen : new_seen)++;
+      fs::copy_file(Path("q.pack.exr"), target, fs::copy_options::overwrite_existing);
+    }
+    std::printf("killed pack writes: %d left the old pack, %d finished\n", old_seen, new_seen);
+  }
+
+  // A bad quantisation option names itself.
+  Output bits = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                       Path("b.pack.exr") + " --quantised --rho-bits 12");
+  EXPECT_EQ(bits.exit_code, 1);
+  EXPECT_NE(bits.text.find("rho_bits"), std::string::npos) << bits.text;
+  EXPECT_FALSE(fs::exists(Path("b.pack.exr")));
 }
 
 // synth --photos -> preprocess -> fit, as a user with files runs it; then the hostile inputs.

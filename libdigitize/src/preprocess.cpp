@@ -382,6 +382,40 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
   if (!R.allFinite() || !out.canvas_from_scan.translation.allFinite() ||
       (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
     return Error{transform_path.string() + ": canvas_from_scan.rotation is not a rotation"};
+
+  const auto boxes_path = dir / "boxes.json";
+  std::ifstream boxes_file(boxes_path);
+  if (!boxes_file) return Error{boxes_path.string() + ": cannot open"};
+  std::stringstream boxes_text;
+  boxes_text << boxes_file.rdbuf();
+  try {
+    const nlohmann::json doc = nlohmann::json::parse(boxes_text.str());
+    if (doc.value("format", "") != "digitize.boxes")
+      return Error{boxes_path.string() + ": not a digitize.boxes file"};
+    out.delta0_mm = doc.at("delta0_mm").get<double>();
+    out.max_height_mm = doc.at("max_height_mm").get<double>();
+    out.cell_px = doc.at("cell_px").get<int>();
+    if (!(std::isfinite(out.delta0_mm) && std::isfinite(out.max_height_mm) && out.cell_px >= 1))
+      return Error{boxes_path.string() + ": delta0_mm, max_height_mm must be finite, cell_px >= 1"};
+    for (const auto& b : doc.at("boxes")) {
+      ReliefBox box;
+      box.x0 = b.at("x0").get<int>();
+      box.y0 = b.at("y0").get<int>();
+      box.width = b.at("width").get<int>();
+      box.height = b.at("height").get<int>();
+      box.h_max_mm = b.at("h_max_mm").get<float>();
+      box.u_max = b.at("u_max").get<int>();
+      box.v_max = b.at("v_max").get<int>();
+      if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
+          int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
+          !std::isfinite(box.h_max_mm))
+        return Error{boxes_path.string() + ": box " + std::to_string(out.boxes.size()) +
+                     " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
+      out.boxes.push_back(box);
+    }
+  } catch (const nlohmann::json::exception& e) {
+    return Error{boxes_path.string() + ": " + e.what()};
+  }
   return out;
 }
 

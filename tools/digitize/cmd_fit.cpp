@@ -12,15 +12,6 @@
 namespace digitize::cli {
 namespace {
 
-struct FitArgs {
-  std::string canvas, photos, held_out, out;
-  std::string method = "fast";
-  PhotoSetOptions photo;
-  ReflectanceFitOptions options;
-  int threads = 0;
-  CLI::Option* dark_ratio_option = nullptr;
-};
-
 // The canvas a photo set is fitted on: a preprocess output folder, or for an RTI capture without
 // one, the flat canvas of its image grid.
 Result<PreprocessedCanvas> LoadCanvas(const FitArgs& args, const PhotoSet& set) {
@@ -43,6 +34,8 @@ Result<PhotoSet> ReadPhotos(const std::string& path, const PhotoSetOptions& o,
   return ReadCalibration(p, o, progress);
 }
 
+}  // namespace
+
 int RunFit(FitArgs args) {
   const std::string cmd = "fit";
   args.options.fit.method = args.method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
@@ -56,7 +49,7 @@ int RunFit(FitArgs args) {
   if (!set.ok()) return Fail(cmd, set.error().message);
   // RTI captures have uncalibrated light intensities (a hand-held light's distance varies), so a
   // dim light looks like a shadow to the unmodelled-shadow test: off unless asked for.
-  if (set->is_rti && args.dark_ratio_option->count() == 0) {
+  if (set->is_rti && (args.dark_ratio_option == nullptr || args.dark_ratio_option->count() == 0)) {
     args.options.dark_outlier_ratio = 0;
     args.options.dark_outlier_fit_ratio = 0;
   }
@@ -96,8 +89,6 @@ int RunFit(FitArgs args) {
               "report.json)\n", args.out.c_str());
   return 0;
 }
-
-}  // namespace
 
 void AddFitCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FitArgs>();

@@ -8,16 +8,6 @@
 #include "progress_bar.h"
 
 namespace digitize::cli {
-namespace {
-
-struct PreprocessArgs {
-  std::vector<std::string> scans;
-  std::string out;
-  ScanReadOptions read;
-  std::string mask;
-  std::vector<int> grid;
-  PreprocessOptions options;
-};
 
 int RunPreprocess(const PreprocessArgs& args) {
   const std::string cmd = "preprocess";
@@ -51,8 +41,6 @@ int RunPreprocess(const PreprocessArgs& args) {
               result->total_seconds, args.out.c_str());
   return 0;
 }
-
-}  // namespace
 
 void AddPreprocessFlags(CLI::App* c, PreprocessOptions& o) {
   c->add_option("--spike-mm", o.sanitize.spike_mm,

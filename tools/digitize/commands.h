@@ -6,7 +6,11 @@
 #include <CLI/CLI.hpp>
 #include <string>
 
+#include "digitize/pack.h"
+#include "digitize/photo_set.h"
 #include "digitize/preprocess.h"
+#include "digitize/reflectance_fit.h"
+#include "digitize/scan_io.h"
 
 namespace digitize::cli {
 
@@ -14,6 +18,37 @@ void AddSynthCommand(CLI::App& app, int& exit_code);
 void AddPreprocessCommand(CLI::App& app, int& exit_code);
 void AddFitCommand(CLI::App& app, int& exit_code);
 void AddDemoCommand(CLI::App& app, int& exit_code);
+void AddPackCommand(CLI::App& app, int& exit_code);
+void AddInspectCommand(CLI::App& app, int& exit_code);
+void AddVerifyCommand(CLI::App& app, int& exit_code);
+void AddRunCommand(CLI::App& app, int& exit_code);
+
+// What `preprocess` and `fit` run on (also driven by `run`).
+struct PreprocessArgs {
+  std::vector<std::string> scans;
+  std::string out;
+  ScanReadOptions read;
+  std::string mask;
+  std::vector<int> grid;
+  PreprocessOptions options;
+};
+int RunPreprocess(const PreprocessArgs& args);
+
+struct FitArgs {
+  std::string canvas, photos, held_out, out;
+  std::string method = "fast";
+  PhotoSetOptions photo;
+  ReflectanceFitOptions options;
+  int threads = 0;
+  CLI::Option* dark_ratio_option = nullptr;  // set: the user chose it (RTI default is off)
+};
+int RunFit(FitArgs args);
+
+// Pack flags (--quantised, --*-bits) shared by pack, run and demo.
+void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quantised);
+// canvas folder + fit folder -> pack file; prints the pack's one-line summary.
+int PackFromFolders(const std::string& command, const std::string& canvas_dir,
+                    const std::string& fit_dir, const std::string& out, PackWriteOptions options);
 
 // Flags for every preprocessing threshold (shared by preprocess, demo and later run).
 void AddPreprocessFlags(CLI::App* command, PreprocessOptions& options);

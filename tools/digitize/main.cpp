@@ -24,6 +24,10 @@ int main(int argc, char** argv) {
   digitize::cli::AddSynthCommand(app, exit_code);
   digitize::cli::AddPreprocessCommand(app, exit_code);
   digitize::cli::AddFitCommand(app, exit_code);
+  digitize::cli::AddPackCommand(app, exit_code);
+  digitize::cli::AddRunCommand(app, exit_code);
+  digitize::cli::AddInspectCommand(app, exit_code);
+  digitize::cli::AddVerifyCommand(app, exit_code);
   digitize::cli::AddDemoCommand(app, exit_code);
   try {
     app.parse(argc, argv);

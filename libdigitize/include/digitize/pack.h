@@ -10,6 +10,9 @@
 //   "surface"      : H (height, mm), NX, NY (unit normal's x, y; nz = sqrt(1 - nx^2 - ny^2)),
 //                    M (texel state + 4 x fit status, small integers: exact in half)
 //   "reflectance"  : rho_d.R/G/B, rho_s.R/G/B, lobe.cx, lobe.cy, lobe.k (cz = 1 by the gauge)
+//   "boxes"        : one pixel per n x n relief cell (float): present (0/1), h_max (mm),
+//                    u_max, v_max (texel of the highest point, relative to the cell's corner);
+//                    boxes are the present cells, so no box list can claim more than the grid
 // 13 half channels = 26 bytes per texel before compression (the paper's budget), ZIP compressed.
 // The per-texel fit error (fit_error.exr) is not stored: the fit brief in the provenance says how
 // well the fit went.
@@ -25,6 +28,7 @@
 #include <vector>
 #include "digitize/core.h"
 #include "digitize/height_field.h"
+#include "digitize/preprocess.h"
 #include "digitize/reflectance_maps.h"
 #include "digitize/relief.h"
 
@@ -35,7 +39,7 @@ inline constexpr const char* kPackFormatName = "digitize.pack";
 
 struct PackInput {
   std::string name;    // file name as given on the command line
-  std::string sha256;  // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
+  std::string sha1;    // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
   uint64_t bytes = 0;
 };
 
@@ -72,10 +76,11 @@ struct Pack {
 // Mantissa bits kept per channel group in kQuantised mode (half has 10). Relative error of a
 // kept value: at most 2^-(bits+1) (round to nearest). The state/status channel is never quantised.
 struct PackQuantisation {
-  int height_bits = 10;  // keep height exact: relief mapping magnifies height errors at grazing views
-  int normal_bits = 6;
-  int rho_bits = 5;
-  int lobe_bits = 6;     // cx, cy, k
+  // Defaults: <= 10 bytes per texel at <= 1 dB relighting loss (docs/benchmarks.md, "Packs").
+  int height_bits = 8;   // 2^-9 relative: 5 um at 2.4 mm of relief, under any scanner's noise
+  int normal_bits = 5;   // nx, ny
+  int rho_bits = 4;      // rho_d, rho_s: 3 % relative
+  int lobe_bits = 6;     // cx, cy, k: kept finer, a glossy lobe (k ~ 500) magnifies its errors
   Status Validate() const;  // each in [0, 10]
 };
 
@@ -90,8 +95,8 @@ struct PackWriteOptions {
 
 // Bounds the reader applies before allocating anything a header claims.
 struct PackReadOptions {
-  int64_t max_texels = int64_t{1} << 28;  // 16384 x 16384
-  int64_t max_boxes = int64_t{1} << 22;
+  int64_t max_texels = int64_t{1} << 26;  // 8192 x 8192 (~4 GiB in memory as a Pack)
+  int64_t max_header_bytes = int64_t{1} << 22;  // all part headers together
 };
 
 // What `digitize inspect` shows; from the header alone (no pixel is decoded).
@@ -107,10 +112,15 @@ struct PackSummary {
   std::string gauge;        // "lafortune1:cz=1,tangent"
   PackProvenance provenance;
   uint64_t file_bytes = 0;
+  int raw_bytes_per_texel = 0;  // uncompressed texel channels of the surface + reflectance parts
   double BytesPerTexel() const {
     return width > 0 && height > 0 ? double(file_bytes) / (double(width) * height) : 0.0;
   }
 };
+
+// A pack from a preprocessed canvas (ReadPreprocessOutputs: field, normals, boxes) and the
+// reflectance maps fitted on it. Errors: different grid sizes, or a pack that does not Validate.
+Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps, PackProvenance provenance);
 
 // Writes atomically (temporary file beside `path`, then rename). Refuses a pack that does not
 // Validate() or whose values do not fit in half (|v| > 65504), naming the map and texel.
@@ -127,6 +137,35 @@ Result<PackSummary> InspectPack(const std::filesystem::path& path,
 
 // The values a pack written with `options` reads back as (half rounding, then quantisation):
 // what the relighting error of an encoding is measured with, without writing a file.
+// Precondition: pack.Validate() is ok.
 Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options);
+
+// `digitize verify`: ReadPack plus the consistency a reader does not need but a keeper wants:
+// every box's h_max is the height at (u_max, v_max) and the highest in its cell, H bounds every
+// height, the cells without a box hold no height above delta0 + tolerance... (within half
+// rounding). One line per check in `checks`; the first failure is the error.
+struct PackVerification {
+  PackSummary summary;
+  std::vector<std::string> checks;  // "boxes: 312 cells, h_max = cell maximum (half rounding)"
+};
+Result<PackVerification> VerifyPack(const std::filesystem::path& path,
+                                    const PackReadOptions& options = {});
+
+// Tool version and the time now (UTC, ISO 8601); the rest empty.
+PackProvenance NewProvenance();
+
+// Appends each file with its SHA-1 and size (name as given). Error names the file.
+Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<std::filesystem::path>& files);
+
+// Provenance of a pack made from a `digitize preprocess` folder and a `digitize fit` folder (either
+// may be empty: an RTI capture has no canvas folder): every file of both hashed (named
+// "<folder>/<file>"), the fit's brief, both stages' options and their own inputs (their
+// report.json), `pack_options` (a JSON object), the tool version and the time now (UTC).
+Result<PackProvenance> ProvenanceFromOutputs(const std::filesystem::path& canvas_dir,
+                                             const std::filesystem::path& fit_dir,
+                                             const std::string& pack_options_json);
+
+// SHA-1 of a file's bytes (provenance), hex. Error names the file.
+Result<std::string> FileSha1(const std::filesystem::path& path);
 
 }  // namespace digitize

@@ -66,9 +66,15 @@ struct PreprocessedCanvas {
   HeightField field;
   Grid<Vec3f> normals;
   RigidTransform canvas_from_scan;
+  // boxes.json (a flat canvas: no boxes, delta0 = 0)
+  double delta0_mm = 0;
+  double max_height_mm = 0;
+  int cell_px = 16;
+  std::vector<ReliefBox> boxes;
 };
 // Errors name the file: missing, unreadable, sizes that differ, a mask value that is no texel
-// state, NaN/Inf heights or normals, a transform whose rotation is not a rotation.
+// state, NaN/Inf heights or normals, a transform whose rotation is not a rotation, boxes outside
+// the grid.
 Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir);
 
 }  // namespace digitize

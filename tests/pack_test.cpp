@@ -1,0 +1,438 @@
+// Texture packs: round trips (bit-exact in half mode, within the stated bound when quantised),
+// the size budget, and every way a pack file can be wrong -- truncated, bit-flipped, a forged
+// oversized header, a newer version, a plain EXR, values beyond half -- refused with an error
+// naming the file, never a crash, never a partial file.
+#include "digitize/pack.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "digitize/image_io.h"
+#include "digitize/normals.h"
+#include "digitize/relief.h"
+
+namespace digitize {
+namespace {
+
+namespace fs = std::filesystem;
+
+#define ASSERT_OK(status_expr)                       \
+  do {                                               \
+    const Status status_ = (status_expr);            \
+    ASSERT_TRUE(status_.ok()) << status_.message();  \
+  } while (0)
+
+fs::path TempDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() /
+                       ("digitize_pack_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::vector<char> ReadBytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void WriteBytes(const fs::path& p, const std::vector<char>& bytes) {
+  std::ofstream out(p, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+// A painting-like pack: an impasto bump with noise on a canvas with an outside border, relief
+// boxes from ClassifyRelief, reflectance drawn from the ranges the fit produces (k from 1 to
+// 1000 log-uniform, rho_s up to ~k / 2 pi), every fit status present.
+Pack MakeTestPack(int w, int h, uint32_t seed, bool with_relief = true) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
+  Pack p;
+  p.field.pitch_mm = 0.125;
+  p.field.height_mm = Grid<float>(w, h, 0.0f);
+  p.field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const bool border = x == 0 || y == 0 || x == w - 1 || y == h - 1;
+      if (border) {
+        p.field.state(x, y) = TexelState::kOutside;
+        continue;
+      }
+      const float dx = (x - 0.4f * w) / (0.15f * w), dy = (y - 0.5f * h) / (0.2f * h);
+      const float bump = with_relief ? 1.5f * std::exp(-(dx * dx + dy * dy)) : 0.0f;
+      p.field.height_mm(x, y) = bump + 0.01f * u01(rng);
+      if (u01(rng) < 0.02f) p.field.state(x, y) = TexelState::kFilled;
+    }
+  p.normals = ComputeNormals(p.field);
+  ReliefOptions ro;
+  ro.cell_px = 8;
+  const ReliefResult relief = ClassifyRelief(p.field, ro);
+  p.delta0_mm = relief.delta0_mm;
+  p.max_height_mm = relief.max_height_mm;
+  p.cell_px = relief.cell_px;
+  p.boxes = relief.boxes;
+  p.maps = ReflectanceMaps::Zeros(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (p.field.state(x, y) == TexelState::kOutside) continue;
+      LafortuneParams lp;
+      lp.rho_d = Vec3f(u01(rng), u01(rng), u01(rng)) * 0.3f;
+      lp.k = std::pow(10.0f, 3.0f * u01(rng));
+      lp.rho_s = Vec3f(u01(rng), u01(rng), u01(rng)) * (lp.k + 2) / 6.3f;
+      lp.cx = -1.0f - 0.2f * u01(rng);
+      lp.cy = -1.0f + 0.3f * u01(rng);
+      lp.cz = 1.0f;
+      p.maps.Set(x, y, lp);
+      p.maps.status(x, y) = static_cast<TexelFitStatus>(rng() % kTexelFitStatusCount);
+      p.maps.fit_error(x, y) = 0.01f * u01(rng);
+    }
+  p.canvas_from_scan.rotation = Eigen::AngleAxisd(0.3, Vec3d(0.2, 0.5, 1).normalized()).toRotationMatrix();
+  p.canvas_from_scan.translation = Vec3d(-12.5, 3.25, 100.0);
+  p.provenance.tool_version = "digitize test";
+  p.provenance.created_utc = "2026-11-30T00:00:00Z";
+  p.provenance.fit_brief = "97.8 % converged; 1 s";
+  p.provenance.options_json = R"({"fit":{"k_max":5000}})";
+  p.provenance.inputs = {{"scan.exr", "0123456789abcdef0123456789abcdef01234567", 1234}};
+  return p;
+}
+
+template <class T>
+bool SameBits(const Grid<T>& a, const Grid<T>& b) {
+  return a.width == b.width && a.height == b.height &&
+         std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(T)) == 0;
+}
+
+// Everything a pack carries, compared bit for bit (fit_error is not stored: the reader returns 0).
+void ExpectIdentical(const Pack& a, const Pack& b) {
+  EXPECT_TRUE(SameBits(a.field.height_mm, b.field.height_mm));
+  EXPECT_TRUE(SameBits(a.field.state, b.field.state));
+  EXPECT_EQ(a.field.pitch_mm, b.field.pitch_mm);
+  EXPECT_TRUE(SameBits(a.normals, b.normals));
+  EXPECT_TRUE(SameBits(a.maps.rho_d, b.maps.rho_d));
+  EXPECT_TRUE(SameBits(a.maps.rho_s, b.maps.rho_s));
+  EXPECT_TRUE(SameBits(a.maps.lobe, b.maps.lobe));
+  EXPECT_TRUE(SameBits(a.maps.status, b.maps.status));
+  EXPECT_EQ(a.delta0_mm, b.delta0_mm);
+  EXPECT_EQ(a.max_height_mm, b.max_height_mm);
+  EXPECT_EQ(a.cell_px, b.cell_px);
+  ASSERT_EQ(a.boxes.size(), b.boxes.size());
+  for (size_t i = 0; i < a.boxes.size(); ++i) {
+    EXPECT_EQ(a.boxes[i].x0, b.boxes[i].x0);
+    EXPECT_EQ(a.boxes[i].y0, b.boxes[i].y0);
+    EXPECT_EQ(a.boxes[i].width, b.boxes[i].width);
+    EXPECT_EQ(a.boxes[i].height, b.boxes[i].height);
+    EXPECT_EQ(a.boxes[i].h_max_mm, b.boxes[i].h_max_mm);
+    EXPECT_EQ(a.boxes[i].u_max, b.boxes[i].u_max);
+    EXPECT_EQ(a.boxes[i].v_max, b.boxes[i].v_max);
+  }
+  EXPECT_TRUE(a.canvas_from_scan.rotation == b.canvas_from_scan.rotation);
+  EXPECT_TRUE(a.canvas_from_scan.translation == b.canvas_from_scan.translation);
+  EXPECT_EQ(a.provenance.tool_version, b.provenance.tool_version);
+  EXPECT_EQ(a.provenance.fit_brief, b.provenance.fit_brief);
+  ASSERT_EQ(a.provenance.inputs.size(), b.provenance.inputs.size());
+  EXPECT_EQ(a.provenance.inputs[0].sha1, b.provenance.inputs[0].sha1);
+}
+
+TEST(Pack, TestPackIsValidAndHasBoxes) {
+  const Pack p = MakeTestPack(64, 48, 1);
+  ASSERT_TRUE(p.Validate().ok()) << p.Validate().message();
+  EXPECT_GT(p.boxes.size(), 3u);  // the bump rises above delta0 in several 8x8 cells
+  EXPECT_GT(p.delta0_mm, 0.0);
+}
+
+TEST(Pack, HalfRoundTripIsBitExact) {
+  const fs::path dir = TempDir("half");
+  const Pack p = MakeTestPack(64, 48, 2);
+  ASSERT_OK(WritePack(dir / "p.pack.exr", p));
+  auto r = ReadPack(dir / "p.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  // Writing what was read gives the same values again (a stable fixed point).
+  ASSERT_OK(WritePack(dir / "q.pack.exr", *r));
+  auto r2 = ReadPack(dir / "q.pack.exr");
+  ASSERT_TRUE(r2.ok());
+  ExpectIdentical(*r, *r2);
+  fs::remove_all(dir);
+}
+
+// Half keeps 11 significant bits: round to nearest is within 2^-11 relative (normal numbers;
+// values below 2^-14 are subnormal and within 2^-25 absolute).
+TEST(Pack, HalfEncodingErrorIsHalfRounding) {
+  const Pack p = MakeTestPack(40, 30, 3);
+  const Pack e = EncodePackValues(p, {});
+  auto within = [](float a, float b) {
+    return std::abs(a - b) <= std::ldexp(1.0f, -11) * std::abs(b) + std::ldexp(1.0f, -25);
+  };
+  for (size_t i = 0; i < p.field.height_mm.size(); ++i) {
+    ASSERT_TRUE(within(e.field.height_mm.data[i], p.field.height_mm.data[i]));
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_TRUE(within(e.maps.rho_d.data[i][c], p.maps.rho_d.data[i][c]));
+      ASSERT_TRUE(within(e.maps.rho_s.data[i][c], p.maps.rho_s.data[i][c]));
+    }
+    ASSERT_TRUE(within(e.maps.lobe.data[i][3], p.maps.lobe.data[i][3]));
+    // nz is recomputed from the stored (nx, ny): the normal moves by about the rounding of nx, ny.
+    ASSERT_LT((e.normals.data[i] - p.normals.data[i]).norm(), 2e-3f);
+    ASSERT_NEAR(e.normals.data[i].norm(), 1.0f, 1e-6f);
+  }
+}
+
+TEST(Pack, QuantisedRoundTripIsWithinTheStatedBound) {
+  const fs::path dir = TempDir("quant");
+  const Pack p = MakeTestPack(64, 48, 4);
+  PackWriteOptions o;
+  o.encoding = PackEncoding::kQuantised;
+  o.quantisation = {8, 6, 5, 6};
+  ASSERT_OK(WritePack(dir / "q.pack.exr", p, o));
+  auto r = ReadPack(dir / "q.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, o), *r);
+  // Stated bound: 2^-(bits+1) relative for the kept mantissa, after the half rounding 2^-11.
+  auto bound = [](int bits) { return std::ldexp(1.0f, -(bits + 1)) + std::ldexp(1.0f, -11); };
+  for (size_t i = 0; i < p.field.height_mm.size(); ++i) {
+    ASSERT_LE(std::abs(r->field.height_mm.data[i] - p.field.height_mm.data[i]),
+              bound(8) * std::abs(p.field.height_mm.data[i]) + 1e-7f);
+    for (int c = 0; c < 3; ++c)
+      ASSERT_LE(std::abs(r->maps.rho_s.data[i][c] - p.maps.rho_s.data[i][c]),
+                bound(5) * p.maps.rho_s.data[i][c] + 1e-7f);
+    ASSERT_LE(std::abs(r->maps.lobe.data[i][3] - p.maps.lobe.data[i][3]),
+              bound(6) * p.maps.lobe.data[i][3] + 1e-7f);
+  }
+  auto s = InspectPack(dir / "q.pack.exr");
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ(s->encoding, PackEncoding::kQuantised);
+  EXPECT_EQ(s->quantisation.rho_bits, 5);
+  fs::remove_all(dir);
+}
+
+// The paper's budget: 26 bytes per texel before compression; compression must help.
+TEST(Pack, SizeBudget) {
+  const fs::path dir = TempDir("size");
+  const Pack p = MakeTestPack(128, 96, 5);
+  ASSERT_OK(WritePack(dir / "h.pack.exr", p));
+  PackWriteOptions o;
+  o.encoding = PackEncoding::kQuantised;
+  ASSERT_OK(WritePack(dir / "q.pack.exr", p, o));
+  auto h = InspectPack(dir / "h.pack.exr");
+  auto q = InspectPack(dir / "q.pack.exr");
+  ASSERT_TRUE(h.ok() && q.ok());
+  EXPECT_EQ(h->raw_bytes_per_texel, 26);
+  EXPECT_LT(h->BytesPerTexel(), 26.0);
+  // Random reflectance is the worst case for a compressor; dropping mantissa bits still shrinks it.
+  EXPECT_LT(q->BytesPerTexel(), h->BytesPerTexel() * 0.9);
+  EXPECT_EQ(h->width, 128);
+  EXPECT_EQ(h->box_count, p.boxes.size());
+  EXPECT_EQ(h->provenance.inputs.size(), 1u);
+  fs::remove_all(dir);
+}
+
+TEST(Pack, FlatCanvasWithoutBoxesRoundTrips) {
+  const fs::path dir = TempDir("flat");
+  const Pack p = MakeTestPack(33, 17, 6, /*with_relief=*/false);
+  ASSERT_TRUE(p.boxes.empty());
+  ASSERT_OK(WritePack(dir / "f.pack.exr", p));
+  auto r = ReadPack(dir / "f.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  auto v = VerifyPack(dir / "f.pack.exr");
+  EXPECT_TRUE(v.ok()) << v.error().message;
+  fs::remove_all(dir);
+}
+
+TEST(Pack, VerifyPassesAGoodPackAndCatchesAWrongBox) {
+  const fs::path dir = TempDir("verify");
+  Pack p = MakeTestPack(64, 48, 7);
+  ASSERT_OK(WritePack(dir / "good.pack.exr", p));
+  auto v = VerifyPack(dir / "good.pack.exr");
+  ASSERT_TRUE(v.ok()) << v.error().message;
+  EXPECT_GE(v->checks.size(), 4u);
+  // A box whose h_max is not its cell's peak: still a valid pack, but not a consistent one.
+  ASSERT_FALSE(p.boxes.empty());
+  p.boxes[0].h_max_mm = static_cast<float>(p.delta0_mm);
+  ASSERT_OK(WritePack(dir / "bad.pack.exr", p));
+  EXPECT_TRUE(ReadPack(dir / "bad.pack.exr").ok());
+  auto bad = VerifyPack(dir / "bad.pack.exr");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("box 0"), std::string::npos) << bad.error().message;
+  fs::remove_all(dir);
+}
+
+TEST(Pack, WriteRefusesInvalidPacksAndLeavesTheOldFile) {
+  const fs::path dir = TempDir("refuse");
+  const fs::path path = dir / "p.pack.exr";
+  const Pack good = MakeTestPack(32, 24, 8);
+  ASSERT_OK(WritePack(path, good));
+  const auto before = ReadBytes(path);
+
+  Pack nan = good;
+  nan.maps.rho_d(5, 6) = Vec3f(std::nanf(""), 0, 0);
+  Status s = WritePack(path, nan);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("p.pack.exr"), std::string::npos) << s.message();
+
+  Pack huge = good;
+  huge.maps.rho_s(7, 8) = Vec3f(1e6f, 0, 0);  // beyond half: would read back as Inf
+  s = WritePack(path, huge);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("rho_s at texel 7, 8"), std::string::npos) << s.message();
+
+  Pack outside_box = good;
+  ASSERT_FALSE(outside_box.boxes.empty());
+  outside_box.boxes[0].u_max = outside_box.boxes[0].x0 + outside_box.boxes[0].width;
+  EXPECT_FALSE(WritePack(path, outside_box).ok());
+
+  PackWriteOptions o;
+  o.encoding = PackEncoding::kQuantised;
+  o.quantisation.rho_bits = 11;
+  s = WritePack(path, good, o);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("rho_bits"), std::string::npos);
+
+  EXPECT_EQ(ReadBytes(path), before);  // untouched
+  int files = 0;
+  for (auto& e : fs::directory_iterator(dir)) files += e.is_regular_file();
+  EXPECT_EQ(files, 1);  // no temporary left behind
+  fs::remove_all(dir);
+}
+
+// Every prefix of a pack is refused (the header scan, the OpenEXR reader or the checksum),
+// naming the file.
+TEST(Pack, TruncatedPacksAreRefused) {
+  const fs::path dir = TempDir("trunc");
+  ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(32, 24, 9)));
+  const auto bytes = ReadBytes(dir / "p.pack.exr");
+  const fs::path cut = dir / "cut.pack.exr";
+  for (size_t len : {size_t{0}, size_t{4}, size_t{8}, size_t{100}, bytes.size() / 4, bytes.size() / 2,
+                     bytes.size() - 100, bytes.size() - 1}) {
+    WriteBytes(cut, std::vector<char>(bytes.begin(), bytes.begin() + static_cast<long>(len)));
+    auto r = ReadPack(cut);
+    ASSERT_FALSE(r.ok()) << "length " << len;
+    EXPECT_NE(r.error().message.find("cut.pack.exr"), std::string::npos) << r.error().message;
+  }
+  fs::remove_all(dir);
+}
+
+// A flipped bit anywhere is either refused or harmless (an attribute nobody reads): the reader
+// never returns values other than the ones written.
+TEST(Pack, BitFlippedPacksAreRefusedOrHarmless) {
+  const fs::path dir = TempDir("flip");
+  const Pack p = MakeTestPack(32, 24, 10);
+  ASSERT_OK(WritePack(dir / "p.pack.exr", p));
+  const Pack expected = EncodePackValues(p, {});
+  const auto bytes = ReadBytes(dir / "p.pack.exr");
+  const fs::path flipped = dir / "f.pack.exr";
+  std::mt19937 rng(11);
+  int refused = 0, harmless = 0;
+  for (int trial = 0; trial < 150; ++trial) {
+    auto b = bytes;
+    const size_t at = rng() % b.size();
+    b[at] = static_cast<char>(b[at] ^ (1 << (rng() % 8)));
+    WriteBytes(flipped, b);
+    auto r = ReadPack(flipped);
+    if (!r.ok()) {
+      ++refused;
+      EXPECT_NE(r.error().message.find("f.pack.exr"), std::string::npos) << r.error().message;
+      continue;
+    }
+    ++harmless;
+    SCOPED_TRACE("byte " + std::to_string(at));
+    ExpectIdentical(expected, *r);
+    if (::testing::Test::HasFailure()) break;
+  }
+  EXPECT_GT(refused, 100);  // almost every byte is pixel data, guarded by the checksum
+  std::printf("bit flips: %d refused, %d harmless\n", refused, harmless);
+  fs::remove_all(dir);
+}
+
+// Patches the first occurrence of `from` (same length as `to`) in the file.
+bool Patch(std::vector<char>& bytes, const std::string& from, const std::string& to) {
+  const auto it = std::search(bytes.begin(), bytes.end(), from.begin(), from.end());
+  if (it == bytes.end()) return false;
+  std::copy(to.begin(), to.end(), it);
+  return true;
+}
+
+TEST(Pack, NewerVersionIsRefused) {
+  const fs::path dir = TempDir("version");
+  ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(16, 16, 12)));
+  auto bytes = ReadBytes(dir / "p.pack.exr");
+  // digitize:version is a 1-character string attribute: name, type, size 1 (little endian), "1".
+  const std::string attr = std::string("digitize:version") + '\0' + "string" + '\0' +
+                           std::string("\x01\x00\x00\x00", 4) + "1";
+  std::string newer = attr;
+  newer.back() = '7';
+  ASSERT_TRUE(Patch(bytes, attr, newer));
+  WriteBytes(dir / "v7.pack.exr", bytes);
+  auto r = ReadPack(dir / "v7.pack.exr");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("version 7 is newer"), std::string::npos) << r.error().message;
+  EXPECT_FALSE(InspectPack(dir / "v7.pack.exr").ok());
+  fs::remove_all(dir);
+}
+
+// A forged data window claiming 2^30 x 2^30 pixels is refused before anything is allocated.
+TEST(Pack, OversizedHeaderIsRefusedBeforeAllocation) {
+  const fs::path dir = TempDir("oversize");
+  ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(16, 16, 13)));
+  auto bytes = ReadBytes(dir / "p.pack.exr");
+  const std::string window = std::string("dataWindow") + '\0' + "box2i" + '\0' +
+                             std::string("\x10\x00\x00\x00", 4) + std::string(8, '\0') +
+                             std::string("\x0f\x00\x00\x00\x0f\x00\x00\x00", 8);
+  const std::string forged = window.substr(0, window.size() - 8) +
+                             std::string("\xff\xff\xff\x3f\xff\xff\xff\x3f", 8);
+  ASSERT_TRUE(Patch(bytes, window, forged));
+  WriteBytes(dir / "big.pack.exr", bytes);
+  auto r = ReadPack(dir / "big.pack.exr");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("-texel limit"), std::string::npos) << r.error().message;
+  // A caller's tighter bound applies too.
+  PackReadOptions tight;
+  tight.max_texels = 100;
+  auto t = ReadPack(dir / "p.pack.exr", tight);
+  ASSERT_FALSE(t.ok());
+  EXPECT_NE(t.error().message.find("100-texel limit"), std::string::npos) << t.error().message;
+  fs::remove_all(dir);
+}
+
+TEST(Pack, OtherFilesAreNotPacks) {
+  const fs::path dir = TempDir("other");
+  ASSERT_TRUE(WriteFloatExr(dir / "plain.exr", Grid<float>(8, 8, 1.0f), "Y").ok());
+  auto r = ReadPack(dir / "plain.exr");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("plain.exr"), std::string::npos);
+  EXPECT_NE(r.error().message.find("single-part"), std::string::npos) << r.error().message;
+  WriteBytes(dir / "text.pack.exr", {'h', 'e', 'l', 'l', 'o', ' ', 'w', 'o', 'r', 'l', 'd'});
+  r = ReadPack(dir / "text.pack.exr");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("not an OpenEXR file"), std::string::npos) << r.error().message;
+  r = ReadPack(dir / "missing.pack.exr");
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("no such file"), std::string::npos);
+  r = ReadPack(dir);
+  ASSERT_FALSE(r.ok());
+  fs::remove_all(dir);
+}
+
+TEST(Pack, AssembleChecksGridSizes) {
+  const Pack p = MakeTestPack(20, 10, 14);
+  PreprocessedCanvas c;
+  c.field = p.field;
+  c.normals = p.normals;
+  c.delta0_mm = p.delta0_mm;
+  c.max_height_mm = p.max_height_mm;
+  c.cell_px = p.cell_px;
+  c.boxes = p.boxes;
+  auto ok = AssemblePack(c, p.maps, p.provenance);
+  ASSERT_TRUE(ok.ok()) << ok.error().message;
+  auto bad = AssemblePack(c, ReflectanceMaps::Zeros(10, 10), {});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("another canvas"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace digitize

@@ -1,0 +1,208 @@
+// `digitize run`: scan(s) + photos -> pack in one go (preprocess, fit and pack in memory; the
+// intermediate folders only with --work).
+#include <cstdio>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "digitize/output_dir.h"
+#include "digitize/relight.h"
+#include "progress_bar.h"
+
+namespace digitize::cli {
+namespace {
+
+struct RunArgs {
+  PreprocessArgs preprocess;
+  FitArgs fit;
+  std::string out, work;
+  PackWriteOptions pack;
+  bool quantised = false;
+};
+
+Result<PhotoSet> ReadAnyPhotoSet(const std::string& path, const PhotoSetOptions& o,
+                                 const ProgressCallback& progress) {
+  const std::filesystem::path p(path);
+  if (p.extension() == ".lp" || p.extension() == ".LP") return ReadRtiCapture(p, o, progress);
+  return ReadCalibration(p, o, progress);
+}
+
+std::string OptionsOf(const std::string& report_json) {
+  const auto doc = nlohmann::json::parse(report_json, nullptr, false);
+  return doc.is_object() && doc.contains("options") ? doc["options"].dump() : "{}";
+}
+
+int Run(RunArgs args) {
+  const std::string cmd = "run";
+  FitArgs& fa = args.fit;
+  fa.options.fit.method = fa.method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
+  fa.options.fit.num_threads = fa.threads;
+  fa.options.samples.trace.num_threads = fa.threads;
+  args.pack.encoding = args.quantised ? PackEncoding::kQuantised : PackEncoding::kHalf;
+  if (Status s = args.pack.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = fa.photo.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = fa.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.preprocess.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+
+  // 1. Photos first: a bad calibration fails before minutes of preprocessing.
+  ProgressBar bar("run");
+  Result<PhotoSet> set = ReadAnyPhotoSet(fa.photos, fa.photo, bar.Callback());
+  if (!set.ok()) return Fail(cmd, set.error().message);
+  if (set->is_rti && (fa.dark_ratio_option == nullptr || fa.dark_ratio_option->count() == 0)) {
+    fa.options.dark_outlier_ratio = 0;  // uncalibrated RTI lights: see `digitize fit`
+    fa.options.dark_outlier_fit_ratio = 0;
+  }
+
+  // 2. The canvas: preprocessed scans, or for an RTI capture without a scan its flat image grid.
+  PreprocessedCanvas canvas;
+  std::optional<PreprocessResult> preprocessed;
+  std::string preprocess_options = "{}";
+  if (!args.preprocess.scans.empty()) {
+    ScanReadOptions read = args.preprocess.read;
+    read.mask = args.preprocess.mask;
+    if (args.preprocess.grid.size() == 2) {
+      read.grid_width = args.preprocess.grid[0];
+      read.grid_height = args.preprocess.grid[1];
+    }
+    if (Status s = read.Validate(); !s.ok()) return Fail(cmd, s.message());
+    std::vector<Scan> exposures;
+    for (const std::string& path : args.preprocess.scans) {
+      Result<Scan> scan = ReadScan(path, read);
+      if (!scan.ok()) return Fail(cmd, scan.error().message);
+      exposures.push_back(std::move(scan).value());
+    }
+    Result<PreprocessResult> r = Preprocess(std::move(exposures), args.preprocess.options, bar.Callback());
+    if (!r.ok()) return Fail(cmd, r.error().message);
+    preprocessed = std::move(r).value();
+    canvas.field = preprocessed->field;
+    canvas.normals = preprocessed->normals;
+    canvas.canvas_from_scan = preprocessed->canvas.canvas_from_scan;
+    canvas.delta0_mm = preprocessed->relief.delta0_mm;
+    canvas.max_height_mm = preprocessed->relief.max_height_mm;
+    canvas.cell_px = preprocessed->relief.cell_px > 0 ? preprocessed->relief.cell_px : 16;
+    canvas.boxes = preprocessed->relief.boxes;
+    preprocess_options = OptionsOf(
+        PreprocessReportJson(*preprocessed, args.preprocess.options, args.preprocess.scans));
+  } else if (set->is_rti) {
+    auto flat = FlatCanvasForRti(*set);
+    if (!flat.ok()) return Fail(cmd, flat.error().message);
+    canvas.field = std::move(flat).value();
+    canvas.normals = Grid<Vec3f>(canvas.field.width(), canvas.field.height(), Vec3f::UnitZ());
+  } else {
+    return Fail(cmd, "a scan is required with a calibration file (" + fa.photos +
+                     "); only an RTI capture (.lp) can be packed on a flat canvas without one");
+  }
+
+  // 3. Fit.
+  Result<ReflectanceFitResult> fit = FitReflectance(canvas.field, canvas.normals,
+                                                    canvas.canvas_from_scan, *set, fa.options,
+                                                    bar.Callback());
+  if (!fit.ok()) {
+    bar.Finish();
+    return Fail(cmd, fit.error().message);
+  }
+
+  // 4. Pack, with provenance: every input file hashed, every stage's options.
+  std::vector<std::string> photo_inputs = {fa.photos};
+  PackProvenance provenance = NewProvenance();
+  std::vector<std::filesystem::path> files(args.preprocess.scans.begin(), args.preprocess.scans.end());
+  files.emplace_back(fa.photos);
+  for (const Photo& p : set->photos) files.push_back(p.path);
+  if (Status s = AddProvenanceInputs(provenance, files); !s.ok()) return Fail(cmd, s.message());
+  provenance.fit_brief = fit->report.Brief();
+  nlohmann::json options = {
+      {"preprocess", nlohmann::json::parse(preprocess_options, nullptr, false)},
+      {"fit", nlohmann::json::parse(OptionsOf(ReflectanceReportJson(*fit, fa.options, photo_inputs)),
+                                    nullptr, false)},
+      {"pack", {{"encoding", ToString(args.pack.encoding)}}}};
+  provenance.options_json = options.dump();
+
+  if (!args.work.empty()) {
+    Status written = WriteDirectoryAtomically(args.work, [&](const std::filesystem::path& dir) {
+      if (preprocessed) {
+        if (Status s = WritePreprocessOutputs(dir / "canvas", *preprocessed, args.preprocess.options,
+                                              args.preprocess.scans);
+            !s.ok())
+          return s;
+      }
+      return WriteReflectanceOutputs(dir / "fit", *fit, fa.options, photo_inputs);
+    });
+    if (!written.ok()) return Fail(cmd, written.message());
+  }
+  auto pack = AssemblePack(std::move(canvas), fit->maps, std::move(provenance));
+  if (!pack.ok()) return Fail(cmd, pack.error().message);
+  if (Status s = WritePack(args.out, *pack, args.pack); !s.ok()) return Fail(cmd, s.message());
+
+  // 5. Held-out photos relit from the pack as written (what a user of the pack gets).
+  std::optional<HeldOutScore> score;
+  if (!fa.held_out.empty()) {
+    auto read = ReadPack(args.out);
+    if (!read.ok()) return Fail(cmd, read.error().message);
+    Result<PhotoSet> held = ReadAnyPhotoSet(fa.held_out, fa.photo, bar.Callback());
+    if (!held.ok()) return Fail(cmd, held.error().message);
+    auto s = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan, *held);
+    if (!s.ok()) return Fail(cmd, s.error().message);
+    score = *s;
+  }
+  bar.Finish();
+  if (preprocessed)
+    for (const StepReport& step : preprocessed->steps)
+      std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
+  std::printf("photos: %s\n", set->summary.Brief().c_str());
+  std::printf("samples: %s\n", fit->report.samples.Brief().c_str());
+  std::printf("fit: %s\n", fit->report.Brief().c_str());
+  if (score) std::printf("from the pack: %s\n", score->Brief().c_str());
+  auto summary = InspectPack(args.out);
+  if (!summary.ok()) return Fail(cmd, summary.error().message);
+  std::printf("pack: ");
+  std::printf("%s: %dx%d texels, %zu boxes, %s, %.2f bytes/texel\n", args.out.c_str(),
+              summary->width, summary->height, summary->box_count, ToString(summary->encoding),
+              summary->BytesPerTexel());
+  return 0;
+}
+
+}  // namespace
+
+void AddRunCommand(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<RunArgs>();
+  CLI::App* c = app.add_subcommand(
+      "run",
+      "Scan(s) + registered photos -> texture pack in one go (preprocess, fit, pack). An RTI "
+      "capture (.lp) without a scan is packed on a flat canvas.");
+  c->add_option("scans", args->preprocess.scans, "Scan file(s), as for `digitize preprocess`")
+      ->check(CLI::ExistingFile);
+  c->add_option("--photos", args->fit.photos, "Calibration JSON or RTI .lp file")
+      ->required()->check(CLI::ExistingFile);
+  c->add_option("-o,--out", args->out, "Pack file to write (replaced only on success)")->required();
+  c->add_option("--work", args->work,
+                "Also write the canvas/ and fit/ folders here (for inspection or re-packing)");
+  c->add_option("--held-out", args->fit.held_out,
+                "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
+      ->check(CLI::ExistingFile);
+  c->add_option("--pixel-pitch-mm", args->preprocess.read.pixel_pitch_mm,
+                "Sample spacing (mm) of depth-only scans")->group("Input");
+  c->add_option("--height-scale-mm", args->preprocess.read.height_scale_mm,
+                "mm per count for 16-bit depth images")->group("Input");
+  c->add_option("--mask", args->preprocess.mask, "Scan mask image; 0 = missing sample")
+      ->check(CLI::ExistingFile)->group("Input");
+  c->add_option("--grid", args->preprocess.grid, "WIDTH HEIGHT of a PLY point grid")
+      ->expected(2)->group("Input");
+  AddPreprocessFlags(c, args->preprocess.options);
+  c->add_option("--method", args->fit.method, "fast (variable projection) or ceres (reference)")
+      ->check(CLI::IsMember({"fast", "ceres"}))->capture_default_str()->group("Fit");
+  c->add_option("--noise-sigma", args->fit.options.fit.noise_sigma,
+                "Radiance noise per channel (linear units, 1 = white)")
+      ->capture_default_str()->group("Fit");
+  args->fit.dark_ratio_option =
+      c->add_option("--dark-outlier-ratio", args->fit.options.dark_outlier_ratio,
+                    "Samples below this share of the diffuse floor are unmodelled shadows")
+          ->capture_default_str()->group("Fit");
+  c->add_option("--rti-pitch-mm", args->fit.photo.rti_pixel_pitch_mm,
+                "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+  c->add_option("--threads", args->fit.threads, "Worker threads (0 = all cores)")
+      ->capture_default_str()->group("Performance");
+  AddPackWriteFlags(c, args->pack, args->quantised);
+  c->callback([args, &exit_code] { exit_code = Run(*args); });
+}
+
+}  // namespace digitize::cli
