@@ -10,8 +10,8 @@
 // from this one run.
 // Writes docs/bench_viewer_table1.csv and docs/bench_viewer_table2.csv for bench/plot_viewer.gp.
 //
-//   viewer_bench [--long-side=768] [--width=512] [--height=384] [--frames=5] [--delta0=0.10]
-//                [--mesh-triangles=100000] [--csv-dir=docs] [--shots=DIR]
+//   viewer_bench [--long-side=768] [--width=512] [--height=384] [--frames=7] [--delta0=0.10]
+//                [--mesh-triangles=100000] [--csv-dir=docs] [--shots=DIR] [--tables=1,2]
 // --shots writes every Table 1 image, its reference and a x4 difference image as PNGs.
 #include <algorithm>
 #include <cstdio>
@@ -37,7 +37,8 @@ using namespace digitize::viewer;
 std::string Arg(int argc, char** argv, const std::string& name, const std::string& fallback) {
   const std::string prefix = "--" + name + "=";
   for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind(prefix, 0) == 0) return std::string(argv[i]).substr(prefix.size());
+    if (std::string(argv[i]).rfind(prefix, 0) == 0)
+      return std::string(argv[i]).substr(prefix.size());
   return fallback;
 }
 
@@ -68,14 +69,16 @@ int main(int argc, char** argv) {
   const int long_side = std::stoi(Arg(argc, argv, "long-side", "768"));
   const int width = std::stoi(Arg(argc, argv, "width", "512"));
   const int height = std::stoi(Arg(argc, argv, "height", "384"));
-  const int frames = std::stoi(Arg(argc, argv, "frames", "5"));
+  const int frames = std::stoi(Arg(argc, argv, "frames", "7"));
   const double delta0 = std::stod(Arg(argc, argv, "delta0", "0.10"));
   const size_t mesh_budget = std::stoul(Arg(argc, argv, "mesh-triangles", "100000"));
   const std::filesystem::path csv_dir = Arg(argc, argv, "csv-dir", "docs");
   const std::string shots = Arg(argc, argv, "shots", "");
+  const std::string tables = Arg(argc, argv, "tables", "1,2");  // which tables to run
   if (!shots.empty()) std::filesystem::create_directories(shots);
   auto save = [&](const Grid<Vec3f>& img, const std::string& name) {
-    if (!shots.empty()) (void)WritePngRgb8(std::filesystem::path(shots) / (name + ".png"), ToneMap(img));
+    if (!shots.empty())
+      (void)WritePngRgb8(std::filesystem::path(shots) / (name + ".png"), ToneMap(img));
   };
 
   synth::PaintingOptions po;  // 400 x 300 mm
@@ -97,10 +100,11 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::printf("# %s\n", (*context)->Description().c_str());
-  std::printf("# painting %dx%d texels (%.0fx%.0f mm), %zu boxes of %d px, delta0 %.2f mm, H %.2f mm;"
-              " image %dx%d; min and median of %d frames; Table 2 PSNR: point-sampled\n",
-              pack.width(), pack.height(), pack.width_mm(), pack.height_mm(), pack.boxes.size(),
-              pack.cell_px, pack.delta0_mm, pack.max_height_mm, width, height, frames);
+  std::printf(
+      "# painting %dx%d texels (%.0fx%.0f mm), %zu boxes of %d px, delta0 %.2f mm, H %.2f mm;"
+      " image %dx%d; min and median of %d frames; Table 2 PSNR: point-sampled\n",
+      pack.width(), pack.height(), pack.width_mm(), pack.height_mm(), pack.boxes.size(),
+      pack.cell_px, pack.delta0_mm, pack.max_height_mm, width, height, frames);
   const Light light = StandardLight(pack);
 
   // Two renderers: full mesh and simplified mesh (each paints its own copy of the pack).
@@ -138,81 +142,86 @@ int main(int argc, char** argv) {
   add("screen-error", full->get(), Technique::kScreenSpaceError);
 
   std::filesystem::create_directories(csv_dir);
-  std::ofstream t1(csv_dir / "bench_viewer_table1.csv");
-  t1 << "view,technique,ms,hz,median_ms,psnr_db,psnr_interior_db,psnr_aa_db,boxes_drawn,boxes_blended,"
-        "boxes_total,triangles\n";
-  std::printf("\nTable 1: frame time (ms, Hz) and PSNR (dB) vs the Embree reference\n");
-  std::printf("%-15s %-13s %9s %8s %9s %8s %9s %8s %7s\n", "view", "technique", "min ms", "Hz",
-              "median ms", "PSNR", "interior", "AA 4x4", "boxes");
-  for (const PaperView& pv : AllPaperViews()) {
-    const ViewCamera v = MakePaperView(pack.width_mm(), pack.height_mm(), pv, width, height);
-    const RelitImage ref = RenderReference(*tracer, pack, v, light, false);
-    const Grid<uint8_t> interior = InteriorMask(ref.mask);
-    const int ss = kCompareSupersampling;
-    const ViewCamera v_ss = Supersampled(v, ss);
-    const RelitImage ref_ss = RenderReference(*tracer, pack, v_ss, light, false);
-    const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
-    const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
-    save(ref.rgb, pv.Name() + "-reference");
-    double relief_ms = 0, adaptive_ms = 0, mesh_ms = 0;
-    for (const Mode& m : modes) {
-      const Timing t = Time(*m.renderer, v, light, m.options, frames);
-      const ImageComparison c = CompareImages(t.last.rgb, ref.rgb, ref.mask, kPsnrPeak);
-      const ImageComparison ci = CompareImages(t.last.rgb, ref.rgb, interior, kPsnrPeak);
-      const Grid<Vec3f> aa = Downsample(m.renderer->Render(v_ss, {light}, m.options).rgb, ss);
-      const ImageComparison ca = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak);
-      const FrameStats& s = t.last.stats;
-      if (!shots.empty()) {
-        save(t.last.rgb, pv.Name() + "-" + m.name);
-        Grid<Vec3f> diff = t.last.rgb;
-        for (size_t i = 0; i < diff.data.size(); ++i)
-          diff.data[i] = (diff.data[i] - ref.rgb.data[i]).cwiseAbs() * 4.0f;
-        save(diff, pv.Name() + "-" + m.name + "-diff4");
+  if (tables.find('1') != std::string::npos) {
+    std::ofstream t1(csv_dir / "bench_viewer_table1.csv");
+    t1 << "view,technique,ms,hz,median_ms,psnr_db,psnr_interior_db,psnr_aa_db,boxes_drawn,boxes_"
+          "blended,"
+          "boxes_total,triangles\n";
+    std::printf("\nTable 1: frame time (ms, Hz) and PSNR (dB) vs the Embree reference\n");
+    std::printf("%-15s %-13s %9s %8s %9s %8s %9s %8s %7s\n", "view", "technique", "min ms", "Hz",
+                "median ms", "PSNR", "interior", "AA 4x4", "boxes");
+    for (const PaperView& pv : AllPaperViews()) {
+      const ViewCamera v = MakePaperView(pack.width_mm(), pack.height_mm(), pv, width, height);
+      const RelitImage ref = RenderReference(*tracer, pack, v, light, false);
+      const Grid<uint8_t> interior = InteriorMask(ref.mask);
+      const int ss = kCompareSupersampling;
+      const ViewCamera v_ss = Supersampled(v, ss);
+      const RelitImage ref_ss = RenderReference(*tracer, pack, v_ss, light, false);
+      const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
+      const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
+      save(ref.rgb, pv.Name() + "-reference");
+      double relief_ms = 0, adaptive_ms = 0, mesh_ms = 0;
+      for (const Mode& m : modes) {
+        const Timing t = Time(*m.renderer, v, light, m.options, frames);
+        const ImageComparison c = CompareImages(t.last.rgb, ref.rgb, ref.mask, kPsnrPeak);
+        const ImageComparison ci = CompareImages(t.last.rgb, ref.rgb, interior, kPsnrPeak);
+        const Grid<Vec3f> aa = Downsample(m.renderer->Render(v_ss, {light}, m.options).rgb, ss);
+        const ImageComparison ca = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak);
+        const FrameStats& s = t.last.stats;
+        if (!shots.empty()) {
+          save(t.last.rgb, pv.Name() + "-" + m.name);
+          Grid<Vec3f> diff = t.last.rgb;
+          for (size_t i = 0; i < diff.data.size(); ++i)
+            diff.data[i] = (diff.data[i] - ref.rgb.data[i]).cwiseAbs() * 4.0f;
+          save(diff, pv.Name() + "-" + m.name + "-diff4");
+        }
+        std::printf("%-15s %-13s %9.2f %8.1f %9.2f %8.2f %9.2f %8.2f %7d\n", pv.Name().c_str(),
+                    m.name.c_str(), t.min_ms, 1000.0 / t.min_ms, t.median_ms, c.psnr_db, ci.psnr_db,
+                    ca.psnr_db, s.boxes_drawn);
+        t1 << pv.Name() << "," << m.name << "," << t.min_ms << "," << 1000.0 / t.min_ms << ","
+           << t.median_ms << "," << c.psnr_db << "," << ci.psnr_db << "," << ca.psnr_db << ","
+           << s.boxes_drawn << "," << s.boxes_blended << "," << s.boxes_total << ","
+           << s.mesh_triangles << "\n";
+        if (m.name == "relief") relief_ms = t.min_ms;
+        if (m.name == "adaptive") adaptive_ms = t.min_ms;
+        if (m.name == "mesh") mesh_ms = t.min_ms;
       }
-      std::printf("%-15s %-13s %9.2f %8.1f %9.2f %8.2f %9.2f %8.2f %7d\n", pv.Name().c_str(),
-                  m.name.c_str(), t.min_ms, 1000.0 / t.min_ms, t.median_ms, c.psnr_db,
-                  ci.psnr_db, ca.psnr_db, s.boxes_drawn);
-      t1 << pv.Name() << "," << m.name << "," << t.min_ms << "," << 1000.0 / t.min_ms << ","
-         << t.median_ms << ","
-         << c.psnr_db << "," << ci.psnr_db << "," << ca.psnr_db << "," << s.boxes_drawn << "," << s.boxes_blended << "," << s.boxes_total
-         << "," << s.mesh_triangles << "\n";
-      if (m.name == "relief") relief_ms = t.min_ms;
-      if (m.name == "adaptive") adaptive_ms = t.min_ms;
-      if (m.name == "mesh") mesh_ms = t.min_ms;
+      std::printf("%-15s adaptive is %.2fx faster than relief everywhere, %.2fx than the mesh\n",
+                  pv.Name().c_str(), relief_ms / adaptive_ms, mesh_ms / adaptive_ms);
     }
-    std::printf("%-15s adaptive is %.2fx faster than relief everywhere, %.2fx than the mesh\n",
-                pv.Name().c_str(), relief_ms / adaptive_ms, mesh_ms / adaptive_ms);
   }
-
-  std::ofstream t2(csv_dir / "bench_viewer_table2.csv");
-  t2 << "n,angle,boxes_total,boxes_drawn,ms,hz,psnr_db,hybrid_ms,hybrid_psnr_db\n";
-  std::printf("\nTable 2: hybrid+adaptive by box size n, framed view\n");
-  std::printf("%5s %-8s %7s %7s %9s %8s %11s %8s\n", "n", "angle", "boxes", "drawn", "min ms", "PSNR",
-              "hybrid ms", "PSNR");
-  for (int n : {5, 10, 20, 50, 100}) {
-    synth::TruthPackOptions o = tpo;
-    o.relief.cell_px = n;
-    const Pack pn = synth::MakeTruthPack(painting, o);
-    auto r = Renderer::Create();
-    if (!r || !(*r)->AddPainting(pn, "n" + std::to_string(n)).ok()) return 1;
-    for (ViewAngle a : {ViewAngle::kFace, ViewAngle::kGrazing}) {
-      const ViewCamera v = MakePaperView(pn.width_mm(), pn.height_mm(),
-                                         {ViewDistance::kFramed, a}, width, height);
-      const RelitImage ref = RenderReference(*tracer, pn, v, light, false);
-      RenderOptions ad;
-      ad.technique = Technique::kHybridAdaptive;
-      RenderOptions hy;
-      hy.technique = Technique::kHybrid;
-      const Timing ta = Time(**r, v, light, ad, frames);
-      const Timing th = Time(**r, v, light, hy, frames);
-      const double pa = CompareImages(ta.last.rgb, ref.rgb, ref.mask, kPsnrPeak).psnr_db;
-      const double ph = CompareImages(th.last.rgb, ref.rgb, ref.mask, kPsnrPeak).psnr_db;
-      const char* angle = a == ViewAngle::kFace ? "face" : "grazing";
-      std::printf("%5d %-8s %7d %7d %9.2f %8.2f %11.2f %8.2f\n", n, angle, ta.last.stats.boxes_total,
-                  ta.last.stats.boxes_drawn, ta.min_ms, pa, th.min_ms, ph);
-      t2 << n << "," << angle << "," << ta.last.stats.boxes_total << ","
-         << ta.last.stats.boxes_drawn << "," << ta.min_ms << "," << 1000.0 / ta.min_ms << ","
-         << pa << "," << th.min_ms << "," << ph << "\n";
+  if (tables.find('2') != std::string::npos) {
+    std::ofstream t2(csv_dir / "bench_viewer_table2.csv");
+    t2 << "n,angle,boxes_total,boxes_drawn,ms,hz,psnr_db,hybrid_ms,hybrid_psnr_db\n";
+    std::printf("\nTable 2: hybrid+adaptive by box size n, framed view\n");
+    std::printf("%5s %-8s %7s %7s %9s %8s %11s %8s\n", "n", "angle", "boxes", "drawn", "min ms",
+                "PSNR", "hybrid ms", "PSNR");
+    for (int n : {5, 10, 20, 50, 100}) {
+      synth::TruthPackOptions o = tpo;
+      o.relief.cell_px = n;
+      const Pack pn = synth::MakeTruthPack(painting, o);
+      auto r = Renderer::Create();
+      if (!r || !(*r)->AddPainting(pn, "n" + std::to_string(n)).ok()) return 1;
+      for (ViewAngle a : {ViewAngle::kFace, ViewAngle::kGrazing}) {
+        const ViewCamera v =
+            MakePaperView(pn.width_mm(), pn.height_mm(), {ViewDistance::kFramed, a}, width, height);
+        const RelitImage ref = RenderReference(*tracer, pn, v, light, false);
+        RenderOptions ad;
+        ad.technique = Technique::kHybridAdaptive;
+        RenderOptions hy;
+        hy.technique = Technique::kHybrid;
+        const Timing ta = Time(**r, v, light, ad, frames);
+        const Timing th = Time(**r, v, light, hy, frames);
+        const double pa = CompareImages(ta.last.rgb, ref.rgb, ref.mask, kPsnrPeak).psnr_db;
+        const double ph = CompareImages(th.last.rgb, ref.rgb, ref.mask, kPsnrPeak).psnr_db;
+        const char* angle = a == ViewAngle::kFace ? "face" : "grazing";
+        std::printf("%5d %-8s %7d %7d %9.2f %8.2f %11.2f %8.2f\n", n, angle,
+                    ta.last.stats.boxes_total, ta.last.stats.boxes_drawn, ta.min_ms, pa, th.min_ms,
+                    ph);
+        t2 << n << "," << angle << "," << ta.last.stats.boxes_total << ","
+           << ta.last.stats.boxes_drawn << "," << ta.min_ms << "," << 1000.0 / ta.min_ms << ","
+           << pa << "," << th.min_ms << "," << ph << "\n";
+      }
     }
   }
   std::printf("\nwrote %s and %s\n", (csv_dir / "bench_viewer_table1.csv").c_str(),

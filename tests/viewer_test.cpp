@@ -6,14 +6,13 @@
 // Images are 256 x 192 so the suite stays fast on 2 cores (and under ASan). PSNR peak: radiance
 // 1 = paper white under the standard light (scene_setup.h).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
-
-#include <unistd.h>
 
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
@@ -82,9 +81,9 @@ Shared& Get() {
   return *s;
 }
 
-#define REQUIRE_GL()                                                      \
-  do {                                                                    \
-    if (!Get().skip_reason.empty()) FAIL() << Get().skip_reason;          \
+#define REQUIRE_GL()                                             \
+  do {                                                           \
+    if (!Get().skip_reason.empty()) FAIL() << Get().skip_reason; \
   } while (0)
 
 RenderOptions Options(Technique t) {
@@ -273,7 +272,8 @@ TEST(ViewerTest, NoPoppingAlongASlowPath) {
     ViewCamera v = framed;
     v.eye_mm = v.target_mm + d * Vec3d(0, -std::sin(a), std::cos(a));
     v.up = Vec3d::UnitY();
-    const RenderedImage ad = Get().renderer->Render(v, {Get().light}, Options(Technique::kHybridAdaptive));
+    const RenderedImage ad =
+        Get().renderer->Render(v, {Get().light}, Options(Technique::kHybridAdaptive));
     const Grid<Vec3f> hy = Render(v, Options(Technique::kHybrid));
     min_drawn = std::min(min_drawn, ad.stats.boxes_drawn);
     max_drawn = std::max(max_drawn, ad.stats.boxes_drawn);
@@ -285,8 +285,8 @@ TEST(ViewerTest, NoPoppingAlongASlowPath) {
     prev_adaptive = ad.rgb;
     prev_hybrid = hy;
   }
-  std::printf("dolly: boxes drawn %d .. %d of %zu, %d frames blend, worst excess %.5f\n",
-              min_drawn, max_drawn, p.boxes.size(), blended_frames, worst_excess);
+  std::printf("dolly: boxes drawn %d .. %d of %zu, %d frames blend, worst excess %.5f\n", min_drawn,
+              max_drawn, p.boxes.size(), blended_frames, worst_excess);
   EXPECT_EQ(min_drawn, 0);
   EXPECT_GT(max_drawn, int(p.boxes.size()) / 2);
   EXPECT_GT(blended_frames, 2);
@@ -317,8 +317,8 @@ TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {
   Light light;
   light.type = LightType::kPoint;
   const double d = 300, e = 20 * 3.14159265358979323846 / 180;
-  light.position_mm = Vec3d(p.width_mm() / 2, p.height_mm() / 2, 0) +
-                      d * Vec3d(-std::cos(e), 0, std::sin(e));
+  light.position_mm =
+      Vec3d(p.width_mm() / 2, p.height_mm() / 2, 0) + d * Vec3d(-std::cos(e), 0, std::sin(e));
   light.intensity = Vec3f::Constant(float(3.14159265358979323846 * d * d));
   for (ViewAngle a : {ViewAngle::kFace, ViewAngle::kGrazing}) {
     const ViewCamera v = View(ViewDistance::kClose, a);
@@ -333,8 +333,10 @@ TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {
       const Grid<Vec3f> lit = Get().renderer->Render(Supersampled(v, ss), {light}, o).rgb;
       const Grid<Vec3f> aa = Downsample(lit, ss);
       const double psnr = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak).psnr_db;
-      const Grid<Vec3f> unlit = Get().renderer->Render(Supersampled(v, ss), {light}, Options(t)).rgb;
-      const double psnr_off = CompareImages(Downsample(unlit, ss), ref_aa, mask_aa, kPsnrPeak).psnr_db;
+      const Grid<Vec3f> unlit =
+          Get().renderer->Render(Supersampled(v, ss), {light}, Options(t)).rgb;
+      const double psnr_off =
+          CompareImages(Downsample(unlit, ss), ref_aa, mask_aa, kPsnrPeak).psnr_db;
       std::printf("close-%s %-9s vs reference with shadows: on %6.2f dB, off %6.2f dB (4x4)\n",
                   a == ViewAngle::kFace ? "face" : "grazing", ToString(t), psnr, psnr_off);
       EXPECT_GE(psnr, 35.0);
@@ -356,14 +358,16 @@ TEST(ViewerTest, CameraPathReadsAndRejectsBadFiles) {
   ASSERT_TRUE(WriteTextFile(good, R"({"format": "digitize.camera_path", "version": 1,
     "width": 64, "height": 48, "frames": [
       {"eye": [0, 0, 1600], "target": [0, 1000, 1500]},
-      {"eye": [100, 0, 1600], "target": [0, 1000, 1500], "up": [0, 0, 1]}]})").ok());
+      {"eye": [100, 0, 1600], "target": [0, 1000, 1500], "up": [0, 0, 1]}]})")
+                  .ok());
   auto path = ReadCameraPath(good);
   ASSERT_TRUE(path.ok()) << path.error().message;
   ASSERT_EQ(path->size(), 2u);
   EXPECT_EQ((*path)[1].width, 64);
   const auto bad = dir / "bad.json";
   ASSERT_TRUE(WriteTextFile(bad, R"({"format": "digitize.camera_path", "version": 1,
-    "frames": [{"eye": [0, 0, 0], "target": [0, 0, 0]}]})").ok());
+    "frames": [{"eye": [0, 0, 0], "target": [0, 0, 0]}]})")
+                  .ok());
   auto e = ReadCameraPath(bad);
   ASSERT_FALSE(e.ok());
   EXPECT_NE(e.error().message.find("bad.json: frames[0]"), std::string::npos) << e.error().message;

@@ -40,8 +40,8 @@ Pack MakeTruthPack(const Painting& painting, const TruthPackOptions& options) {
   pack.cell_px = relief.cell_px;
   pack.boxes = relief.boxes;
   pack.provenance.tool_version = std::string("digitize ") + DIGITIZE_VERSION;
-  pack.provenance.fit_brief = "ground truth (synthetic painting, seed " +
-                              std::to_string(painting.options.seed) + ")";
+  pack.provenance.fit_brief =
+      "ground truth (synthetic painting, seed " + std::to_string(painting.options.seed) + ")";
   return pack;
 }
 

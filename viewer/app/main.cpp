@@ -164,8 +164,8 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui::Text("%.1f ms/frame (%.0f Hz)", frame_ms, 1000.0 / std::max(frame_ms, 1e-3));
     ImGui::Text("boxes drawn %d of %d (%d blended)", stats.boxes_drawn, stats.boxes_total,
                 stats.boxes_blended);
-    const char* names[] = {"mesh", "relief everywhere", "bump", "hybrid", "hybrid + adaptive",
-                           "screen-space error"};
+    const char* names[] = {"mesh",   "relief everywhere", "bump",
+                           "hybrid", "hybrid + adaptive", "screen-space error"};
     ImGui::Combo("technique", &technique, names, 6);
     float k = float(options.k), emin = float(options.eps_min), emax = float(options.eps_max);
     float px = float(options.max_error_px);
@@ -193,7 +193,8 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
         g.lights[i].intensity = Vec3f::Constant(scale * 1e6f);
       ImGui::PopID();
     }
-    for (const std::string& e : errors) ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "%s", e.c_str());
+    for (const std::string& e : errors)
+      ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "%s", e.c_str());
     ImGui::End();
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
@@ -238,7 +239,8 @@ int main(int argc, char** argv) {
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
   app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
-  app.add_option("--window-shot", window_shot, "window: write the last frame (panel included) here");
+  app.add_option("--window-shot", window_shot,
+                 "window: write the last frame (panel included) here");
   CLI11_PARSE(app, argc, argv);
 
   RenderOptions options;

@@ -1,10 +1,9 @@
 #include "digitize_viewer/gallery.h"
 
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
 #include "digitize_viewer/gl_context.h"
@@ -36,16 +35,16 @@ Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryO
   g.boxes = {
       {Vec3d(-t, -t, -t), Vec3d(W + t, D + t, 0), floor},
       {Vec3d(-t, -t, H), Vec3d(W + t, D + t, H + t), ceiling},
-      {Vec3d(-t, D, 0), Vec3d(W + t, D + t, H), wall},   // back wall
-      {Vec3d(-t, -t, 0), Vec3d(W + t, 0, H), wall},      // front wall (behind the start)
-      {Vec3d(-t, 0, 0), Vec3d(0, D, H), wall},           // left
-      {Vec3d(W, 0, 0), Vec3d(W + t, D, H), wall},        // right
+      {Vec3d(-t, D, 0), Vec3d(W + t, D + t, H), wall},  // back wall
+      {Vec3d(-t, -t, 0), Vec3d(W + t, 0, H), wall},     // front wall (behind the start)
+      {Vec3d(-t, 0, 0), Vec3d(0, D, H), wall},          // left
+      {Vec3d(W, 0, 0), Vec3d(W + t, D, H), wall},       // right
   };
   // Canvas X -> world X, canvas Y -> world Z, canvas Z -> world -Y.
   Mat3d r;
   r << 1, 0, 0, 0, 0, -1, 0, 1, 0;
   double x = (W - (total - o.gap_mm)) / 2 + o.gap_mm / 2;  // centre the row
-  const double wall_y = D - 2;  // canvases 2 mm in front of the wall
+  const double wall_y = D - 2;                             // canvases 2 mm in front of the wall
   const Vec3f gold(0.55f, 0.42f, 0.2f);
   for (const auto& s : sizes_mm) {
     const double x0 = x + o.frame_mm, z0 = o.centre_height_mm - s.y() / 2;
@@ -56,9 +55,9 @@ Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryO
     const double f = o.frame_mm, depth = 40;
     const double x1 = x0 + s.x(), z1 = z0 + s.y(), y0 = wall_y - depth;
     g.boxes.push_back({Vec3d(x0 - f, y0, z0 - f), Vec3d(x1 + f, wall_y, z0), gold});  // bottom
-    g.boxes.push_back({Vec3d(x0 - f, y0, z1), Vec3d(x1 + f, wall_y, z1 + f), gold});   // top
-    g.boxes.push_back({Vec3d(x0 - f, y0, z0), Vec3d(x0, wall_y, z1), gold});           // left
-    g.boxes.push_back({Vec3d(x1, y0, z0), Vec3d(x1 + f, wall_y, z1), gold});           // right
+    g.boxes.push_back({Vec3d(x0 - f, y0, z1), Vec3d(x1 + f, wall_y, z1 + f), gold});  // top
+    g.boxes.push_back({Vec3d(x0 - f, y0, z0), Vec3d(x0, wall_y, z1), gold});          // left
+    g.boxes.push_back({Vec3d(x1, y0, z0), Vec3d(x1 + f, wall_y, z1), gold});          // right
     const Vec3d centre(x0 + s.x() / 2, wall_y, o.centre_height_mm);
     Light light;
     light.type = LightType::kPoint;
@@ -164,8 +163,8 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     if (cameras.size() > 1) {
       char suffix[16];
       std::snprintf(suffix, sizeof(suffix), "_%03zu", i);
-      out = out_png.parent_path() /
-            (out_png.stem().string() + suffix + out_png.extension().string());
+      out =
+          out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
     }
     if (Status s = WritePngRgb8(out, ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
   }

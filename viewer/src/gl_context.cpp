@@ -36,9 +36,13 @@ Result<std::unique_ptr<HeadlessContext>> HeadlessContext::Create() {
   EGLConfig config = nullptr;
   EGLint count = 0;
   if (!eglChooseConfig(display, config_attribs, &config, 1, &count) || count < 1) config = nullptr;
-  const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 4, EGL_CONTEXT_MINOR_VERSION, 5,
+  const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                    4,
+                                    EGL_CONTEXT_MINOR_VERSION,
+                                    5,
                                     EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                                    EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+                                    EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                    EGL_NONE};
   EGLContext context = eglCreateContext(display, config ? config : EGL_NO_CONFIG_KHR,
                                         EGL_NO_CONTEXT, context_attribs);
   if (context == EGL_NO_CONTEXT) return fail("eglCreateContext (OpenGL 4.5 core)");

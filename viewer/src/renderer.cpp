@@ -101,8 +101,8 @@ std::vector<float> CubeTriangles() {
       for (const auto& tri : {std::array<int, 3>{0, 1, 2}, std::array<int, 3>{0, 2, 3}}) {
         std::array<Eigen::Vector3f, 3> t = {q[tri[0]], q[tri[1]], q[tri[2]]};
         if ((t[1] - t[0]).cross(t[2] - t[0]).dot(normal) < 0) std::swap(t[1], t[2]);
-        for (const auto& v : t) out.insert(out.end(), {v.x(), v.y(), v.z(), normal.x(),
-                                                       normal.y(), normal.z()});
+        for (const auto& v : t)
+          out.insert(out.end(), {v.x(), v.y(), v.z(), normal.x(), normal.y(), normal.z()});
       }
     }
   }
@@ -157,12 +157,18 @@ struct Painting {
 
 const char* ToString(Technique t) {
   switch (t) {
-    case Technique::kMesh: return "mesh";
-    case Technique::kReliefEverywhere: return "relief";
-    case Technique::kBump: return "bump";
-    case Technique::kHybrid: return "hybrid";
-    case Technique::kHybridAdaptive: return "adaptive";
-    case Technique::kScreenSpaceError: return "screen-error";
+    case Technique::kMesh:
+      return "mesh";
+    case Technique::kReliefEverywhere:
+      return "relief";
+    case Technique::kBump:
+      return "bump";
+    case Technique::kHybrid:
+      return "hybrid";
+    case Technique::kHybridAdaptive:
+      return "adaptive";
+    case Technique::kScreenSpaceError:
+      return "screen-error";
   }
   return "?";
 }
@@ -273,9 +279,11 @@ struct Renderer::Impl {
   void BuildMesh(Painting& p) {
     const HeightMesh mesh = BuildHeightMesh(p.field, p.mesh_options.max_triangles);
     glCreateBuffers(1, &p.mesh_vbo);
-    glNamedBufferStorage(p.mesh_vbo, mesh.positions.size() * sizeof(float), mesh.positions.data(), 0);
+    glNamedBufferStorage(p.mesh_vbo, mesh.positions.size() * sizeof(float), mesh.positions.data(),
+                         0);
     glCreateBuffers(1, &p.mesh_ibo);
-    glNamedBufferStorage(p.mesh_ibo, mesh.indices.size() * sizeof(uint32_t), mesh.indices.data(), 0);
+    glNamedBufferStorage(p.mesh_ibo, mesh.indices.size() * sizeof(uint32_t), mesh.indices.data(),
+                         0);
     glCreateVertexArrays(1, &p.mesh_vao);
     glVertexArrayVertexBuffer(p.mesh_vao, 0, p.mesh_vbo, 0, 3 * sizeof(float));
     glVertexArrayElementBuffer(p.mesh_vao, p.mesh_ibo);
@@ -572,8 +580,13 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     std::vector<float> outline;
     if (t == Technique::kReliefEverywhere) {
       // One box over the whole canvas, from its lowest to its highest point.
-      inst = {0.0f, 0.0f, float(p.min_height_mm) - 1e-3f, float(p.width_mm), float(p.height_mm),
-              float(p.max_height_mm) + 1e-3f, 1.0f};
+      inst = {0.0f,
+              0.0f,
+              float(p.min_height_mm) - 1e-3f,
+              float(p.width_mm),
+              float(p.height_mm),
+              float(p.max_height_mm) + 1e-3f,
+              1.0f};
       stats.boxes_drawn = 1;
     } else {
       const std::vector<float> alpha = BoxAlphas(pi, camera, options);
@@ -601,8 +614,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                          options.max_linear_steps);
       glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_binary_steps"),
                          options.binary_steps);
-      glNamedBufferData(m.box_instances, inst.size() * sizeof(float), inst.data(),
-                        GL_STREAM_DRAW);
+      glNamedBufferData(m.box_instances, inst.size() * sizeof(float), inst.data(), GL_STREAM_DRAW);
       glBindVertexArray(m.box_vao);
       glEnable(GL_CULL_FACE);
       glCullFace(GL_FRONT);  // back faces give the exit point
@@ -642,14 +654,16 @@ RenderedImage Renderer::Render(const ViewCamera& camera, const std::vector<Light
   RenderedImage out;
   out.stats = Draw(camera, lights, options);
   glFinish();
-  out.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  out.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   std::vector<float> rgba(size_t(camera.width) * camera.height * 4);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, camera.width, camera.height, GL_RGBA, GL_FLOAT, rgba.data());
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
   out.rgb = Grid<Vec3f>(camera.width, camera.height);
   for (int y = 0; y < camera.height; ++y) {
-    const float* row = rgba.data() + size_t(camera.height - 1 - y) * camera.width * 4;  // GL: bottom first
+    const float* row =
+        rgba.data() + size_t(camera.height - 1 - y) * camera.width * 4;  // GL: bottom first
     for (int x = 0; x < camera.width; ++x) {
       Vec3f c(row[4 * x], row[4 * x + 1], row[4 * x + 2]);
       DIGITIZE_CHECK(c.allFinite(), "Renderer::Render: non-finite radiance about to leave");

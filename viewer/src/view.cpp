@@ -45,7 +45,7 @@ Camera ToCamera(const ViewCamera& view) {
 }
 
 std::string PaperView::Name() const {
-  const char* d = distance == ViewDistance::kClose ? "close"
+  const char* d = distance == ViewDistance::kClose    ? "close"
                   : distance == ViewDistance::kFramed ? "framed"
                                                       : "far";
   return std::string(d) + (angle == ViewAngle::kFace ? "-face" : "-grazing");

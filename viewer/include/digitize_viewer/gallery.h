@@ -41,7 +41,8 @@ struct Gallery {
 
 // sizes_mm: each painting's (width, height). Light intensities make a white Lambertian canvas
 // centre read radiance 1 (paper white, as scene_setup.h). An empty list gives the empty room.
-Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryOptions& options = {});
+Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm,
+                    const GalleryOptions& options = {});
 
 // Reads a pack for the viewer (ReadPack). The error names the file; nothing is thrown.
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path);

@@ -63,7 +63,8 @@ enum class Technique {
 inline constexpr Technique kAllTechniques[] = {
     Technique::kMesh,   Technique::kReliefEverywhere, Technique::kBump,
     Technique::kHybrid, Technique::kHybridAdaptive,   Technique::kScreenSpaceError};
-const char* ToString(Technique t);  // "mesh", "relief", "bump", "hybrid", "adaptive", "screen-error"
+const char* ToString(
+    Technique t);  // "mesh", "relief", "bump", "hybrid", "adaptive", "screen-error"
 Result<Technique> ParseTechnique(std::string_view name);
 
 struct RenderOptions {
@@ -84,7 +85,7 @@ struct RenderOptions {
   // (texel under the plane point); 4 removes most of the plane's offset from the true canvas
   // (delta0 above it): framed face view 21 -> 54 dB against the reference (docs/benchmarks.md).
   int bump_parallax_iterations = 4;
-  double ambient = 0;               // ambient radiance factor x rho_d (gallery look; 0 = none)
+  double ambient = 0;  // ambient radiance factor x rho_d (gallery look; 0 = none)
   // Relief self-shadowing: per shading point and light, a march through the height field towards
   // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
   // Off by default, as in the paper; RenderRelit with shadows on is its reference.
@@ -105,17 +106,17 @@ struct MeshOptions {
 };
 
 struct FrameStats {
-  int boxes_total = 0;    // boxes of the drawn paintings
-  int boxes_drawn = 0;    // alpha > 0
-  int boxes_blended = 0;  // 0 < alpha < 1
+  int boxes_total = 0;        // boxes of the drawn paintings
+  int boxes_drawn = 0;        // alpha > 0
+  int boxes_blended = 0;      // 0 < alpha < 1
   size_t mesh_triangles = 0;  // kMesh: triangles drawn
-  double cpu_ms = 0;      // CPU time to issue the frame (GL is asynchronous: see the bench)
+  double cpu_ms = 0;          // CPU time to issue the frame (GL is asynchronous: see the bench)
 };
 
 struct RenderedImage {
   Grid<Vec3f> rgb;  // linear radiance, row 0 = top (as RenderRelit), never NaN/Inf (checked)
   FrameStats stats;
-  double ms = 0;    // Draw + glFinish, steady clock
+  double ms = 0;  // Draw + glFinish, steady clock
 };
 
 // A wall, floor or frame of the gallery: an axis-aligned box in the world frame, Lambertian.
