@@ -448,6 +448,10 @@ TEST(ViewerTest, GalleryScreenshotIsWritten) {
   // Not blank: the painting and the room give a spread of values.
   const auto [lo, hi] = std::minmax_element(img->pixels.begin(), img->pixels.end());
   EXPECT_GT(*hi - *lo, 0.3f);
+  // Its own context came and went: the suite's context is current again and still works.
+  ExpectPlausible(
+      Render(View(ViewDistance::kFramed, ViewAngle::kFace), Options(Technique::kHybrid)),
+      "after the gallery screenshot");
   std::filesystem::remove_all(dir);
 }
 

@@ -5,10 +5,16 @@
 #include <epoxy/egl.h>
 #include <epoxy/gl.h>
 
+#include <mutex>
 #include <sstream>
 
 namespace digitize::viewer {
 namespace {
+// EGL displays are per process and eglTerminate is not reference counted: with two contexts on
+// the same surfaceless display, terminating it for one would pull it from under the other.
+std::mutex display_mutex;
+int display_users = 0;
+
 std::string EglError(const char* step) {
   std::ostringstream s;
   s << "EGL: " << step << " failed (error 0x" << std::hex << eglGetError() << ")";
@@ -24,11 +30,17 @@ Result<std::unique_ptr<HeadlessContext>> HeadlessContext::Create() {
   }
   if (display == EGL_NO_DISPLAY) display = eglGetDisplay(EGL_DEFAULT_DISPLAY);
   if (display == EGL_NO_DISPLAY) return Error{EglError("eglGetDisplay (no surfaceless platform)")};
+  // Whatever context the caller had current comes back when this one goes.
+  const EGLDisplay previous_display = eglGetCurrentDisplay();
+  const EGLContext previous_context = eglGetCurrentContext();
+  const EGLSurface previous_draw = eglGetCurrentSurface(EGL_DRAW);
+  const EGLSurface previous_read = eglGetCurrentSurface(EGL_READ);
+  std::lock_guard<std::mutex> lock(display_mutex);
   EGLint major = 0, minor = 0;
   if (!eglInitialize(display, &major, &minor)) return Error{EglError("eglInitialize")};
   auto fail = [&](const char* step) -> Error {
     Error e{EglError(step)};
-    eglTerminate(display);
+    if (display_users == 0) eglTerminate(display);
     return e;
   };
   if (!eglBindAPI(EGL_OPENGL_API)) return fail("eglBindAPI(OpenGL)");
@@ -53,15 +65,31 @@ Result<std::unique_ptr<HeadlessContext>> HeadlessContext::Create() {
   std::unique_ptr<HeadlessContext> out(new HeadlessContext());
   out->display_ = display;
   out->context_ = context;
+  out->previous_display_ = previous_display;
+  out->previous_context_ = previous_context;
+  out->previous_draw_ = previous_draw;
+  out->previous_read_ = previous_read;
+  ++display_users;
   return out;
 }
 
 HeadlessContext::~HeadlessContext() {
   auto display = static_cast<EGLDisplay>(display_);
-  eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+  std::lock_guard<std::mutex> lock(display_mutex);
+  if (eglGetCurrentContext() == static_cast<EGLContext>(context_)) {
+    if (previous_context_ != EGL_NO_CONTEXT) {
+      eglMakeCurrent(
+          static_cast<EGLDisplay>(previous_display_), static_cast<EGLSurface>(previous_draw_),
+          static_cast<EGLSurface>(previous_read_), static_cast<EGLContext>(previous_context_));
+    } else {
+      eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+    }
+  }
   eglDestroyContext(display, static_cast<EGLContext>(context_));
-  eglTerminate(display);
-  eglReleaseThread();
+  if (--display_users == 0) {
+    eglTerminate(display);
+    if (previous_context_ == EGL_NO_CONTEXT) eglReleaseThread();
+  }
 }
 
 std::string HeadlessContext::Description() const {

@@ -13,8 +13,10 @@ namespace digitize::viewer {
 
 class HeadlessContext {
  public:
-  // Creates the context and makes it current on the calling thread. Errors say which EGL step
-  // failed (no EGL, no surfaceless platform, no OpenGL 4.5 core) with the EGL error code.
+  // Creates the context and makes it current on the calling thread; the context that was current
+  // before (if any) is made current again when this one is destroyed, so a helper may create its
+  // own (RenderGalleryScreenshots) inside a caller that has one. Errors say which EGL step failed
+  // (no EGL, no surfaceless platform, no OpenGL 4.5 core) with the EGL error code.
   static Result<std::unique_ptr<HeadlessContext>> Create();
   ~HeadlessContext();
   HeadlessContext(const HeadlessContext&) = delete;
@@ -27,6 +29,10 @@ class HeadlessContext {
   HeadlessContext() = default;
   void* display_ = nullptr;
   void* context_ = nullptr;
+  void* previous_display_ = nullptr;
+  void* previous_context_ = nullptr;
+  void* previous_draw_ = nullptr;
+  void* previous_read_ = nullptr;
 };
 
 }  // namespace digitize::viewer
