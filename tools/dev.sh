@@ -67,10 +67,7 @@ case "$cmd" in
     # Sanitizers: RelWithDebInfo keeps the suite fast enough; halt on the first UBSan report.
     configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_SANITIZE=ON -DDIGITIZE_BUILD_BENCH=OFF
     cmake --build build-asan -j "$jobs"
-    # LSan: Mesa / LLVM / EGL keep driver-lifetime allocations (suppressions name those
-    # libraries only, never our code).
     ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-      LSAN_OPTIONS=suppressions="$root/tools/lsan_mesa.supp":print_suppressions=0 \
       DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan"
     ;;
   bench)
