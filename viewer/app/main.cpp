@@ -238,6 +238,10 @@ int main(int argc, char** argv) {
   app.add_option("--screenshot", screenshot, "render headless into this PNG and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
+  bool heatmap = false, show_boxes = false, shadows = false;
+  app.add_flag("--heatmap", heatmap, "colour relief by its box's alpha (blue 0 .. red 1)");
+  app.add_flag("--show-boxes", show_boxes, "outline the boxes drawn");
+  app.add_flag("--shadows", shadows, "relief self-shadowing");
   app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
   app.add_option("--window-shot", window_shot,
                  "window: write the last frame (panel included) here");
@@ -251,6 +255,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   options.technique = *t;
+  options.alpha_heatmap = heatmap;
+  options.show_boxes = show_boxes;
+  options.shadows = shadows;
 
   std::vector<std::pair<std::string, Pack>> packs;
   std::vector<std::string> errors;
