@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # One entry point for people and CI. Installs what is missing (Debian 12 packages), builds, and runs.
 #   tools/dev.sh demo    build, then run the whole pipeline on a synthetic painting (digitize demo)
-#   tools/dev.sh test    build, run the test suite, then again under ASan+UBSan
+#   tools/dev.sh test    build, run the test suite, then again under ASan+UBSan, then the fuzzers
+#                        for DIGITIZE_FUZZ_SECONDS each (default 30; 0: replay their corpus only)
+#   tools/dev.sh fuzz [SECONDS]  build the libFuzzer targets (clang, build-fuzz/) and run each for
+#                        SECONDS (default DIGITIZE_FUZZ_SECONDS, else 60) from its seed corpus
 #   tools/dev.sh build   install + build only (Release, in build/)
 #   tools/dev.sh bench   build, then run the benchmarks (writes CSV + plots into docs/)
 # Idempotent: installed packages and an up-to-date build are left alone.
@@ -15,6 +18,7 @@ packages=(
   libeigen3-dev libopencv-dev libceres-dev libopenimageio-dev openimageio-tools
   libembree-dev libcgal-dev libopenmesh-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
+  clang libclang-rt-14-dev  # the fuzz targets: clang's libFuzzer + sanitizer runtimes
   # viewer (issue 5): GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
   libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
 )
@@ -45,6 +49,50 @@ run_tests() {  # run_tests DIR LABEL
   ctest --test-dir "$1" --output-on-failure --no-tests=error -j "$jobs" --timeout 900
 }
 
+# The libFuzzer targets (tests/fuzz/): clang, ASan+UBSan, only the library sources they need.
+build_fuzzers() {
+  CC=clang CXX=clang++ configure build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_FUZZ=ON
+  cmake --build build-fuzz -j "$jobs"
+}
+
+# run_fuzzers SECONDS: every target with a corpus in tests/fuzz/corpus/<target>/, for SECONDS each,
+# starting from a scratch copy of its corpus (the tree is not modified; what the fuzzer learns is
+# thrown away). 0 seconds: replay the corpus only. Fails on any crash, leak, timeout or sanitizer
+# report, and keeps the scratch folder with the reproducer (crash-*, leak-*, timeout-*) and log.
+run_fuzzers() {
+  local seconds=$1 scratch failed=0 corpus target dir
+  scratch=$(mktemp -d "${TMPDIR:-/tmp}/digitize-fuzz.XXXXXX")
+  for corpus in tests/fuzz/corpus/*/; do
+    target=$(basename "$corpus")
+    dir=$scratch/$target
+    mkdir -p "$dir/corpus"
+    cp "$corpus"* "$dir/corpus/"
+    local args=(-timeout=10 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$dir/")
+    [ -f "tests/fuzz/$target.dict" ] && args+=(-dict="tests/fuzz/$target.dict")
+    if [ "$seconds" -gt 0 ]; then args+=(-max_total_time="$seconds"); else args+=(-runs=0); fi
+    echo "== fuzz $target (${seconds} s)"
+    if UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+       LSAN_OPTIONS=suppressions="$root/tests/fuzz/lsan.supp" \
+       "build-fuzz/fuzz/$target" "${args[@]}" "$dir/corpus" > "$dir/log" 2>&1; then
+      grep -a -E '^#[0-9]+[[:space:]].*cov: ' "$dir/log" | tail -n 1 || true
+      grep -a -E 'stat::(number_of_executed_units|average_exec_per_sec)' "$dir/log" | tr '\n' ' ' || true
+      echo
+    else
+      tail -n 80 "$dir/log"
+      for f in "$dir"/crash-* "$dir"/leak-* "$dir"/timeout-* "$dir"/oom-*; do
+        # In CI the scratch folder is gone afterwards: print small reproducers (base64 -d).
+        [ -f "$f" ] && [ "$(stat -c %s "$f")" -le 65536 ] &&
+          { echo "== $(basename "$f") (base64):"; base64 -w 0 "$f"; echo; }
+      done
+      echo "== fuzz $target FAILED: log and reproducer in $dir (fix the bug, then add the" \
+           "reproducer to tests/fuzz/corpus/$target/ as crash_<what>)"
+      failed=1
+    fi
+  done
+  [ $failed -eq 0 ] && rm -rf "$scratch"
+  return $failed
+}
+
 cmd=${1:-}
 case "$cmd" in
   build)
@@ -69,6 +117,13 @@ case "$cmd" in
     cmake --build build-asan -j "$jobs"
     ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
       DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan"
+    build_fuzzers
+    run_fuzzers "${DIGITIZE_FUZZ_SECONDS:-30}"
+    ;;
+  fuzz)
+    install_packages
+    build_fuzzers
+    run_fuzzers "${2:-${DIGITIZE_FUZZ_SECONDS:-60}}"
     ;;
   bench)
     install_packages
@@ -78,7 +133,7 @@ case "$cmd" in
     bash bench/run.sh "$@"
     ;;
   *)
-    echo "usage: tools/dev.sh demo|test|build|bench" >&2
+    echo "usage: tools/dev.sh demo|test|build|bench|fuzz [SECONDS]" >&2
     exit 2
     ;;
 esac

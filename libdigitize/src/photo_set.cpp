@@ -247,6 +247,46 @@ Converted Convert(const FloatImage& image, ColourEncoding encoding, const PhotoS
 // ---------------------------------------------------------------------------------------------
 // Calibration JSON.
 
+// A JSON value as an error message shows it: at most kShownDepth levels deep and about
+// kShownChars characters. Not json::dump: a hostile file can be huge, and dump recurses once per
+// nesting level (a 400 KB file of nested arrays overflowed the stack).
+constexpr int kShownDepth = 2;
+constexpr size_t kShownChars = 80;
+
+void ShowInto(const json& v, int depth, std::string& out) {
+  if (out.size() > kShownChars) return;
+  if (!v.is_structured()) {
+    out += v.dump();  // a scalar: no recursion (a long string is cut below)
+    return;
+  }
+  const bool array = v.is_array();
+  if (v.empty() || depth == 0) {
+    out += v.empty() ? (array ? "[]" : "{}") : (array ? "[...]" : "{...}");
+    return;
+  }
+  out += array ? '[' : '{';
+  bool first = true;
+  for (auto it = v.begin(); it != v.end() && out.size() <= kShownChars; ++it) {
+    if (!first) out += ", ";
+    first = false;
+    if (!array) out += json(it.key()).dump() + ": ";
+    ShowInto(*it, depth - 1, out);
+  }
+  out += array ? ']' : '}';
+}
+
+std::string Show(const json& v) {
+  std::string out;
+  ShowInto(v, kShownDepth, out);
+  if (out.size() > kShownChars) {
+    size_t cut = kShownChars;
+    while (cut > 0 && (static_cast<unsigned char>(out[cut]) & 0xC0) == 0x80) --cut;  // UTF-8
+    out.resize(cut);
+    out += "...";
+  }
+  return out;
+}
+
 // Reading one JSON object, with the key path of every value for the error messages.
 class Fields {
  public:
@@ -263,20 +303,20 @@ class Fields {
   double Number(const std::string& key) const { return NumberOf(Get(key), At(key)); }
   int Integer(const std::string& key) const {
     const json& v = Get(key);
-    if (!v.is_number_integer()) Fail(At(key) + " must be an integer, got " + v.dump());
+    if (!v.is_number_integer()) Fail(At(key) + " must be an integer, got " + Show(v));
     const auto i = v.get<int64_t>();
-    if (i < -kMaxImageSide || i > kMaxImageSide) Fail(At(key) + " is out of range: " + v.dump());
+    if (i < -kMaxImageSide || i > kMaxImageSide) Fail(At(key) + " is out of range: " + Show(v));
     return static_cast<int>(i);
   }
   std::string String(const std::string& key) const {
     const json& v = Get(key);
-    if (!v.is_string()) Fail(At(key) + " must be a string, got " + v.dump());
+    if (!v.is_string()) Fail(At(key) + " must be a string, got " + Show(v));
     return v.get<std::string>();
   }
   Vec3d Vector3(const std::string& key) const {
     const json& v = Get(key);
     if (!v.is_array() || v.size() != 3)
-      Fail(At(key) + " must be an array of 3 numbers, got " + v.dump());
+      Fail(At(key) + " must be an array of 3 numbers, got " + Show(v));
     Vec3d out;
     for (int i = 0; i < 3; ++i) out[i] = NumberOf(v[i], At(key) + "[" + std::to_string(i) + "]");
     return out;
@@ -306,7 +346,7 @@ class Fields {
 
   static std::string TypeName(const json& v) { return v.type_name(); }
   static double NumberOf(const json& v, const std::string& where) {
-    if (!v.is_number()) Fail(where + " must be a number, got " + v.dump());
+    if (!v.is_number()) Fail(where + " must be a number, got " + Show(v));
     const double d = v.get<double>();
     if (!std::isfinite(d)) Fail(where + " is not finite");
     return d;
@@ -322,12 +362,12 @@ RigidTransform ParseTransform(const Fields& f) {
   const std::string rwhere = f.At("rotation");
   const json& r = f.Get("rotation");
   if (!r.is_array() || r.size() != 3)
-    Fail(rwhere + " must be 3 rows of 3 numbers, got " + r.dump());
+    Fail(rwhere + " must be 3 rows of 3 numbers, got " + Show(r));
   Mat3d R;
   for (int i = 0; i < 3; ++i) {
     if (!r[i].is_array() || r[i].size() != 3) {
       Fail(rwhere + " must be 3 rows of 3 numbers, row " + std::to_string(i) + " is " +
-           r[i].dump());
+           Show(r[i]));
     }
     for (int j = 0; j < 3; ++j) {
       R(i, j) = Fields::NumberOf(r[i][j],
@@ -388,8 +428,10 @@ Light ParseLight(const Fields& f) {
     f.OnlyKeys({"type", "direction", "irradiance"});
     light.type = LightType::kDirectional;
     const Vec3d d = f.Vector3("direction");
-    if (!(d.norm() > kMinDirectionNorm)) Fail(f.At("direction") + " is a zero vector");
-    light.direction = d.normalized();
+    // stableNorm: finite components whose squares overflow (1e200) are still a direction.
+    const double norm = d.stableNorm();
+    if (!(norm > kMinDirectionNorm)) Fail(f.At("direction") + " is a zero vector");
+    light.direction = d / norm;
     light.irradiance = f.Rgb("irradiance");
   } else {
     Fail(f.At("type") + " must be \"point\" or \"directional\", got \"" + type + "\"");
@@ -436,12 +478,13 @@ ColourEncoding ParseEncoding(const Fields& f) {
   Fail(f.At("encoding") + " must be \"srgb\", \"linear\" or \"auto\", got \"" + e + "\"");
 }
 
-PhotoSet ParseCalibration(const fs::path& json_path, const std::string& text) {
+PhotoSet ParseCalibration(const fs::path& json_path, std::string_view text) {
   const std::string file = json_path.string();
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {
+    // parse_error, and also out_of_range for a number beyond double ("1e400"): both bad input.
     Fail(file + ": not valid JSON (" + e.what() + ")");
   }
   if (!doc.is_object()) Fail(file + ": the top level must be an object");
@@ -449,7 +492,7 @@ PhotoSet ParseCalibration(const fs::path& json_path, const std::string& text) {
   if (!top.Has("format") || !top.Get("format").is_string() ||
       top.String("format") != "digitize.calibration") {
     Fail(file + ": not a calibration file (\"format\" must be \"digitize.calibration\", got " +
-         (top.Has("format") ? top.Get("format").dump() : std::string("nothing")) + ")");
+         (top.Has("format") ? Show(top.Get("format")) : std::string("nothing")) + ")");
   }
   if (!top.Has("version") || !top.Get("version").is_number_integer()) {
     Fail(file + ": \"version\" must be an integer (this build reads version 1)");
@@ -479,6 +522,8 @@ PhotoSet ParseCalibration(const fs::path& json_path, const std::string& text) {
     photo.entry = f.where();
     const std::string rel = f.String("path");
     if (rel.empty()) Fail(f.At("path") + " is empty");
+    // A path with a NUL would be cut short by the OS and open another file than the one named.
+    if (rel.find('\0') != std::string::npos) Fail(f.At("path") + " contains a NUL character");
     photo.path = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
     photo.camera = ParseRef<Camera>(f, "camera", cameras, "cameras", ParseCamera);
     photo.light = ParseRef<Light>(f, "light", lights, "lights", ParseLight);
@@ -517,16 +562,10 @@ bool ParseDouble(std::string_view s, double* out) {
   return ec == std::errc() && end == s.data() + s.size();
 }
 
-struct LpEntry {
-  std::string name;  // as written
-  Vec3d direction;
-  int line = 0;
-};
-
-std::vector<LpEntry> ParseLp(const fs::path& lp_path, const std::string& text) {
+std::vector<RtiLightEntry> ParseLp(const fs::path& lp_path, std::string_view text) {
   const std::string file = lp_path.string();
   const auto at = [&](int line) { return file + ", line " + std::to_string(line) + ": "; };
-  std::vector<LpEntry> entries;
+  std::vector<RtiLightEntry> entries;
   long long count = -1;
   int count_line = 0;
   int line_no = 0;
@@ -565,30 +604,36 @@ std::vector<LpEntry> ParseLp(const fs::path& lp_path, const std::string& text) {
       Fail(at(line_no) + "more entries than the " + std::to_string(count) +
            " images announced on line " + std::to_string(count_line));
     }
-    LpEntry e;
+    RtiLightEntry e;
     e.line = line_no;
     const size_t n = tokens.size();
-    // The file name is everything before the three numbers (it may contain spaces).
-    std::string_view name = line.substr(0, tokens[n - 3].begin);
-    while (!name.empty() && (name.back() == ' ' || name.back() == '\t')) name.remove_suffix(1);
-    name.remove_prefix(tokens[0].begin);
-    e.name = std::string(name);
+    // The file name is everything before the three numbers (it may contain spaces): from its
+    // first token to the end of its last, so no separator (\r, \v, \f too) sticks to it.
+    const Token& last = tokens[n - 4];
+    e.image = std::string(
+        line.substr(tokens[0].begin, last.begin + last.text.size() - tokens[0].begin));
+    // A name with a NUL would be cut short by the OS and open another file than the one named.
+    if (e.image.find('\0') != std::string::npos) {
+      Fail(at(line_no) + "the file name contains a NUL character");
+    }
     static const char* kAxis[3] = {"x", "y", "z"};
     for (int k = 0; k < 3; ++k) {
       const std::string_view t = tokens[n - 3 + k].text;
       double v = 0;
       if (!ParseDouble(t, &v)) {
         Fail(at(line_no) + "\"" + std::string(t) + "\" is not a number (" + kAxis[k] + " of " +
-             e.name + ")");
+             e.image + ")");
       }
       if (!std::isfinite(v)) {
         Fail(at(line_no) + "\"" + std::string(t) + "\" is not finite (" + kAxis[k] + " of " +
-             e.name + ")");
+             e.image + ")");
       }
       e.direction[k] = v;
     }
-    const double norm = e.direction.norm();
-    if (!(norm > kMinDirectionNorm)) Fail(at(line_no) + "zero light direction for " + e.name);
+    // stableNorm: finite components whose squares overflow (1e200) are still a direction; norm()
+    // gave inf and a zero "unit" vector (found by fuzz_lp).
+    const double norm = e.direction.stableNorm();
+    if (!(norm > kMinDirectionNorm)) Fail(at(line_no) + "zero light direction for " + e.image);
     e.direction /= norm;
     entries.push_back(std::move(e));
   }
@@ -824,17 +869,31 @@ Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options,
   return Status::Ok();
 }
 
+Result<PhotoSet> ParseCalibrationText(std::string_view text, const fs::path& source) {
+  try {
+    return ParseCalibration(source, text);
+  } catch (const BadInput& bad) {
+    return Error{bad.message};
+  }
+}
+
+Result<std::vector<RtiLightEntry>> ParseRtiLightsText(std::string_view text,
+                                                      const fs::path& source) {
+  try {
+    return ParseLp(source, text);
+  } catch (const BadInput& bad) {
+    return Error{bad.message};
+  }
+}
+
 Result<PhotoSet> ReadCalibration(const fs::path& json_path, const PhotoSetOptions& options,
                                  const ProgressCallback& progress) {
   if (Status s = options.Validate(); !s) return Error{s.message()};
   auto text = ReadTextFile(json_path, "calibration file");
   if (!text) return text.error();
-  PhotoSet set;
-  try {
-    set = ParseCalibration(json_path, *text);
-  } catch (const BadInput& bad) {
-    return Error{bad.message};
-  }
+  auto parsed = ParseCalibrationText(*text, json_path);
+  if (!parsed) return parsed.error();
+  PhotoSet set = std::move(*parsed);
   if (Status s = ProbeAll(set); !s) return Error{s.message()};
   if (options.load_pixels) {
     if (Status s = LoadPhotoPixels(set, options, progress); !s) return Error{s.message()};
@@ -847,12 +906,8 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
   if (Status s = options.Validate(); !s) return Error{s.message()};
   auto text = ReadTextFile(lp_path, ".lp light file");
   if (!text) return text.error();
-  std::vector<LpEntry> entries;
-  try {
-    entries = ParseLp(lp_path, *text);
-  } catch (const BadInput& bad) {
-    return Error{bad.message};
-  }
+  auto entries = ParseRtiLightsText(*text, lp_path);
+  if (!entries) return entries.error();
   const fs::path dir = lp_path.parent_path();
   PhotoSet set;
   set.source = lp_path;
@@ -861,10 +916,10 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
 
   // The first image fixes the grid; the camera looks straight down at the canvas centre.
   int width = 0, height = 0;
-  for (const LpEntry& e : entries) {
+  for (const RtiLightEntry& e : *entries) {
     Photo photo;
     photo.entry = lp_path.string() + ", line " + std::to_string(e.line);
-    photo.path = ResolveLpImage(dir, e.name);
+    photo.path = ResolveLpImage(dir, e.image);
     auto header = ReadHeader(photo.path);
     if (!header) return Error{photo.entry + ": " + header.error().message};
     if (width == 0) {

@@ -33,6 +33,7 @@
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "digitize/core.h"
@@ -237,6 +238,28 @@ Result<PhotoSet> ReadCalibration(const std::filesystem::path& json_path,
 Result<PhotoSet> ReadRtiCapture(const std::filesystem::path& lp_path,
                                 const PhotoSetOptions& options = {},
                                 const ProgressCallback& progress = nullptr);
+
+// ---------------------------------------------------------------------------------------------
+// Parsing only: the text of a calibration or .lp file, without the filesystem. The readers above
+// are these plus the file read and the image checks; the fuzz targets (tests/fuzz/) and the
+// corpus test call them directly. `source` is the file the text came from: errors and entries
+// name it and relative image paths are resolved against its folder, but it is never opened, and
+// neither is any image. Errors are the readers' parsing errors, word for word.
+
+// The calibration's photos, unprobed and unloaded: each photo's encoding is as declared (kAuto
+// when not given), its path resolved but not checked. Cameras and lights are validated as in
+// ReadCalibration (rotations snapped, directions normalised).
+Result<PhotoSet> ParseCalibrationText(std::string_view text, const std::filesystem::path& source);
+
+// One image line of a .lp file.
+struct RtiLightEntry {
+  std::string image;  // the file name as written (ReadRtiCapture resolves it; may hold spaces)
+  Vec3d direction = Vec3d::UnitZ();  // towards the light, canvas frame, unit length
+  int line = 0;                      // 1-based line in the .lp file
+};
+// The entries of a .lp file in file order; never empty on success (the count is >= 1 and matches).
+Result<std::vector<RtiLightEntry>> ParseRtiLightsText(std::string_view text,
+                                                      const std::filesystem::path& source);
 
 // Decodes (or re-decodes) the pixels of every photo in parallel, fills photo.rgb / flags /
 // counts and set.summary. On error (the first failing photo in set order is reported) the set is
