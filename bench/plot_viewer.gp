@@ -31,6 +31,8 @@ set title "Table 2: hybrid+adaptive by box size n (framed view)"
 set xtics norotate
 set xlabel "box size n (texels)"
 set ylabel "ms per frame"
+set yrange [0:*]
+set y2range [0:*]
 set logscale x
 set y2label "boxes drawn"
 set y2tics
