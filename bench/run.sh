@@ -11,3 +11,5 @@ gnuplot bench/plot.gp && echo "wrote docs/bench_preprocess.png"
 gnuplot bench/plot_fit.gp && echo "wrote docs/bench_fit.png"
 ./build/bin/pack_bench --csv-dir=docs | tee docs/bench_pack.txt
 gnuplot bench/plot_pack.gp && echo "wrote docs/bench_pack.png"
+./build/bin/viewer_bench --csv-dir=docs | tee docs/bench_viewer.txt
+gnuplot bench/plot_viewer.gp && echo "wrote docs/bench_viewer.png"

@@ -1,0 +1,459 @@
+// Viewer (issue 5): headless renders of a synthetic painting against the Embree reference
+// (RenderRelit on the full height field, same camera, light and shading), per technique and per
+// paper view; relief vs bump at grazing impasto; a flat-height lookup; no popping along a slow
+// path across the adaptive thresholds; packs that fail to load.
+//
+// Images are 256 x 192 so the suite stays fast on 2 cores (and under ASan). PSNR peak: radiance
+// 1 = paper white under the standard light (scene_setup.h).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+
+#include "digitize/image_io.h"
+#include "digitize/relight.h"
+#include "digitize_synth/painting.h"
+#include "digitize_synth/truth_pack.h"
+#include "digitize_viewer/gallery.h"
+#include "digitize_viewer/gl_context.h"
+#include "digitize_viewer/renderer.h"
+#include "digitize_viewer/scene_setup.h"
+#include "digitize_viewer/view.h"
+
+namespace digitize::viewer {
+namespace {
+
+constexpr int kW = 256, kH = 192;
+
+struct Shared {
+  std::unique_ptr<HeadlessContext> context;
+  std::unique_ptr<Renderer> renderer;
+  synth::Painting painting;
+  Pack pack;
+  std::unique_ptr<HeightFieldTracer> tracer;
+  Light light;
+  std::string skip_reason;
+};
+
+Shared& Get() {
+  static Shared* s = [] {
+    auto* s = new Shared();
+    synth::PaintingOptions po;
+    po.width_mm = 160;
+    po.height_mm = 120;
+    po.resolution_px = 256;
+    po.seed = 3;
+    po.impasto_count = 6;
+    s->painting = synth::MakePainting(po);
+    // delta0 at 10 % of H: with the paper's 20-40 % the relief between the true canvas and the
+    // bump plane (stroke ridges, impasto flanks) is drawn by the bump plane, which at grazing
+    // views costs 6-8 dB (28-30 dB against the reference; docs/benchmarks.md).
+    synth::TruthPackOptions tpo;
+    tpo.relief.delta0_fraction = 0.10;
+    s->pack = synth::MakeTruthPack(s->painting, tpo);
+    auto tracer = HeightFieldTracer::Build(s->pack.field);
+    if (!tracer) {
+      s->skip_reason = tracer.error().message;
+      return s;
+    }
+    s->tracer = std::make_unique<HeightFieldTracer>(std::move(*tracer));
+    s->light = StandardLight(s->pack);
+    auto context = HeadlessContext::Create();
+    if (!context) {
+      s->skip_reason = context.error().message;
+      return s;
+    }
+    s->context = std::move(*context);
+    auto renderer = Renderer::Create();
+    if (!renderer) {
+      s->skip_reason = renderer.error().message;
+      return s;
+    }
+    s->renderer = std::move(*renderer);
+    auto index = s->renderer->AddPainting(s->pack, "synthetic");
+    if (!index) s->skip_reason = index.error().message;
+    return s;
+  }();
+  return *s;
+}
+
+#define REQUIRE_GL()                                             \
+  do {                                                           \
+    if (!Get().skip_reason.empty()) FAIL() << Get().skip_reason; \
+  } while (0)
+
+RenderOptions Options(Technique t) {
+  RenderOptions o;
+  o.technique = t;
+  return o;
+}
+
+ViewCamera View(ViewDistance d, ViewAngle a) {
+  const Pack& p = Get().pack;
+  return MakePaperView(p.width_mm(), p.height_mm(), {d, a}, kW, kH);
+}
+
+Grid<Vec3f> Render(const ViewCamera& view, const RenderOptions& options) {
+  return Get().renderer->Render(view, {Get().light}, options).rgb;
+}
+
+double Psnr(const Grid<Vec3f>& test, const RelitImage& ref) {
+  const ImageComparison c = CompareImages(test, ref.rgb, ref.mask, kPsnrPeak);
+  // The far views cover few pixels (762 at far-grazing): still enough to judge.
+  EXPECT_GT(c.pixels, size_t(500)) << "too few canvas pixels compared";
+  return c.psnr_db;
+}
+
+// Mean absolute difference over all pixels and channels.
+double MeanAbsDiff(const Grid<Vec3f>& a, const Grid<Vec3f>& b) {
+  double sum = 0;
+  for (size_t i = 0; i < a.data.size(); ++i) sum += (a.data[i] - b.data[i]).cwiseAbs().sum();
+  return sum / (3.0 * a.data.size());
+}
+
+// Not blank: at least min_lit of the pixels lit (> 0.01) and a mean above 0.02 x min_lit / 0.1.
+void ExpectPlausible(const Grid<Vec3f>& img, const std::string& what, double min_lit = 0.1) {
+  size_t lit = 0;
+  double sum = 0;
+  for (const Vec3f& c : img.data) {
+    ASSERT_TRUE(c.allFinite()) << what;
+    ASSERT_GE(c.minCoeff(), 0.0f) << what;
+    lit += c.maxCoeff() > 0.01f;
+    sum += c.sum();
+  }
+  EXPECT_GT(double(lit), min_lit * img.data.size()) << what << ": blank image";
+  EXPECT_GT(sum / (3.0 * img.data.size()), 0.2 * min_lit) << what << ": nearly black";
+}
+
+// Writes a screenshot when DIGITIZE_VIEWER_SHOTS names a folder (to look at them).
+void MaybeSave(const Grid<Vec3f>& img, const std::string& name) {
+  const char* dir = std::getenv("DIGITIZE_VIEWER_SHOTS");
+  if (!dir) return;
+  std::filesystem::create_directories(dir);
+  (void)WritePngRgb8(std::filesystem::path(dir) / (name + ".png"), ToneMap(img));
+}
+
+TEST(ViewerTest, CameraMatchesReferenceConvention) {
+  const ViewCamera v = View(ViewDistance::kFramed, ViewAngle::kFace);
+  const Camera c = ToCamera(v);
+  // The target projects to the image centre.
+  const Eigen::Vector2d px = c.Project(v.target_mm);
+  EXPECT_NEAR(px.x(), (kW - 1) / 2.0, 1e-9);
+  EXPECT_NEAR(px.y(), (kH - 1) / 2.0, 1e-9);
+  EXPECT_TRUE(v.Validate().ok());
+  ViewCamera bad = v;
+  bad.target_mm = bad.eye_mm;
+  EXPECT_FALSE(bad.Validate().ok());
+}
+
+TEST(ViewerTest, OptionsValidate) {
+  RenderOptions o;
+  EXPECT_TRUE(o.Validate().ok());
+  o.eps_max = o.eps_min;
+  EXPECT_FALSE(o.Validate().ok());
+  o = RenderOptions{};
+  o.k = std::nan("");
+  EXPECT_FALSE(o.Validate().ok());
+  EXPECT_FALSE(ParseTechnique("nope").ok());
+  for (Technique t : kAllTechniques) EXPECT_EQ(*ParseTechnique(ToString(t)), t);
+}
+
+TEST(ViewerTest, EveryTechniqueRendersAPlausibleImage) {
+  REQUIRE_GL();
+  const ViewCamera v = View(ViewDistance::kFramed, ViewAngle::kGrazing);
+  for (Technique t : kAllTechniques) {
+    const Grid<Vec3f> img = Render(v, Options(t));
+    ExpectPlausible(img, ToString(t));
+    MaybeSave(img, std::string("framed-grazing-") + ToString(t));
+  }
+}
+
+// Image error of every mode against the Embree reference at the paper's six views, on 4 x 4
+// box-filtered images (scene_setup.h: point samples at grazing views measure aliasing, not the
+// renderer); the point-sampled PSNR is printed too. Thresholds: hybrid+adaptive >= 35 dB (the
+// issue's bar), and so must be every mode that draws the relief (mesh, relief everywhere,
+// hybrid, screen-space error); bump only may fail it at grazing views (its parallax error is what
+// the boxes are for) but stays an image of the painting (>= 20 dB).
+TEST(ViewerTest, MatchesEmbreeReferenceAtPaperViews) {
+  REQUIRE_GL();
+  const int ss = kCompareSupersampling;
+  for (const PaperView& pv : AllPaperViews()) {
+    const ViewCamera v = View(pv.distance, pv.angle);
+    const RelitImage ref = RenderReference(*Get().tracer, Get().pack, v, Get().light, false);
+    const RelitImage ref_ss =
+        RenderReference(*Get().tracer, Get().pack, Supersampled(v, ss), Get().light, false);
+    const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
+    const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
+    MaybeSave(ref.rgb, pv.Name() + "-reference");
+    for (Technique t : kAllTechniques) {
+      const Grid<Vec3f> img = Render(v, Options(t));
+      // Half the pixels that see the canvas in the reference must be lit.
+      const double canvas_share =
+          double(std::count(ref.mask.data.begin(), ref.mask.data.end(), 1)) / ref.mask.size();
+      ExpectPlausible(img, pv.Name() + " " + ToString(t), 0.5 * canvas_share);
+      const double psnr_point = Psnr(img, ref);
+      const Grid<Vec3f> aa = Downsample(Render(Supersampled(v, ss), Options(t)), ss);
+      const ImageComparison c = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak);
+      EXPECT_GT(c.pixels, size_t(500)) << "too few canvas pixels compared";
+      MaybeSave(img, pv.Name() + "-" + ToString(t));
+      Grid<Vec3f> diff(kW, kH);
+      for (size_t i = 0; i < diff.data.size(); ++i)
+        diff.data[i] = (img.data[i] - ref.rgb.data[i]).cwiseAbs() * 4.0f;
+      MaybeSave(diff, pv.Name() + "-" + ToString(t) + "-diff4");
+      std::printf("%-15s %-13s point %6.2f dB, 4x4 box-filtered %6.2f dB\n", pv.Name().c_str(),
+                  ToString(t), psnr_point, c.psnr_db);
+      const bool bump_only = t == Technique::kBump;
+      EXPECT_GE(c.psnr_db, bump_only ? 20.0 : 35.0) << pv.Name() << " " << ToString(t);
+    }
+  }
+}
+
+// Relief mapping shows what bump mapping cannot: at a grazing close view of impasto the two
+// differ over a visible share of the image (measured: 4.7 % of pixels by more than 0.05,
+// bound 3 %), and relief is the one that matches the reference.
+TEST(ViewerTest, ReliefDiffersFromBumpAtGrazingImpasto) {
+  REQUIRE_GL();
+  const ViewCamera v = View(ViewDistance::kClose, ViewAngle::kGrazing);
+  RenderOptions bump = Options(Technique::kBump);
+  bump.bump_parallax_iterations = 0;  // the paper's bump mapping
+  const Grid<Vec3f> b = Render(v, bump);
+  const Grid<Vec3f> r = Render(v, Options(Technique::kReliefEverywhere));
+  size_t differ = 0;
+  for (size_t i = 0; i < b.data.size(); ++i)
+    differ += (b.data[i] - r.data[i]).cwiseAbs().maxCoeff() > 0.05f;
+  const double share = double(differ) / b.data.size();
+  std::printf("close-grazing: relief vs bump differ on %.1f %% of pixels\n", 100 * share);
+  EXPECT_GT(share, 0.03);
+  const RelitImage ref = RenderReference(*Get().tracer, Get().pack, v, Get().light, false);
+  EXPECT_GT(Psnr(r, ref), Psnr(b, ref) + 5.0);
+}
+
+// A mis-bound height texture can look plausible: the same maps with a flat height field must
+// give a clearly different relief image, and a worse one against the reference.
+TEST(ViewerTest, ReliefDiffersFromFlatHeightLookup) {
+  REQUIRE_GL();
+  Pack flat = Get().pack;
+  std::fill(flat.field.height_mm.data.begin(), flat.field.height_mm.data.end(), 0.0f);
+  auto renderer = Renderer::Create();
+  ASSERT_TRUE(renderer.ok()) << renderer.error().message;
+  ASSERT_TRUE((*renderer)->AddPainting(flat, "flat").ok());
+  const ViewCamera v = View(ViewDistance::kClose, ViewAngle::kGrazing);
+  const RenderOptions o = Options(Technique::kReliefEverywhere);
+  const Grid<Vec3f> real = Render(v, o);
+  const Grid<Vec3f> flat_img = (*renderer)->Render(v, {Get().light}, o).rgb;
+  ExpectPlausible(flat_img, "flat");
+  const double diff = MeanAbsDiff(real, flat_img);
+  std::printf("close-grazing: relief vs flat lookup mean |diff| %.4f\n", diff);
+  EXPECT_GT(diff, 0.004);  // measured 0.008
+  const RelitImage ref = RenderReference(*Get().tracer, Get().pack, v, Get().light, false);
+  EXPECT_GT(Psnr(real, ref), Psnr(flat_img, ref) + 10.0);
+}
+
+// No popping: dollying in at 30 deg from the normal from 10x to 1x the framed distance, boxes
+// switch on (the adaptive rule's thresholds are crossed: counted), yet consecutive frames of
+// hybrid+adaptive differ no more than those of hybrid with every box always on (the motion
+// itself) plus a stated bound: 0.002 mean radiance (paper white = 1) per step.
+TEST(ViewerTest, NoPoppingAlongASlowPath) {
+  REQUIRE_GL();
+  const Pack& p = Get().pack;
+  const ViewCamera framed = View(ViewDistance::kFramed, ViewAngle::kFace);
+  const double d_framed = (framed.eye_mm - framed.target_mm).norm();
+  const int steps = 40;
+  const double a = 30.0 * 3.14159265358979323846 / 180.0;
+  Grid<Vec3f> prev_adaptive, prev_hybrid;
+  int min_drawn = 1 << 30, max_drawn = 0, blended_frames = 0;
+  double worst_excess = -1e9;
+  for (int i = 0; i <= steps; ++i) {
+    const double d = d_framed * std::pow(10.0, 1.0 - double(i) / steps);
+    ViewCamera v = framed;
+    v.eye_mm = v.target_mm + d * Vec3d(0, -std::sin(a), std::cos(a));
+    v.up = Vec3d::UnitY();
+    const RenderedImage ad =
+        Get().renderer->Render(v, {Get().light}, Options(Technique::kHybridAdaptive));
+    const Grid<Vec3f> hy = Render(v, Options(Technique::kHybrid));
+    min_drawn = std::min(min_drawn, ad.stats.boxes_drawn);
+    max_drawn = std::max(max_drawn, ad.stats.boxes_drawn);
+    blended_frames += ad.stats.boxes_blended > 0;
+    if (i > 0) {
+      const double da = MeanAbsDiff(ad.rgb, prev_adaptive), dh = MeanAbsDiff(hy, prev_hybrid);
+      worst_excess = std::max(worst_excess, da - dh);
+    }
+    prev_adaptive = ad.rgb;
+    prev_hybrid = hy;
+  }
+  std::printf("dolly: boxes drawn %d .. %d of %zu, %d frames blend, worst excess %.5f\n", min_drawn,
+              max_drawn, p.boxes.size(), blended_frames, worst_excess);
+  EXPECT_EQ(min_drawn, 0);
+  EXPECT_GT(max_drawn, int(p.boxes.size()) / 2);
+  EXPECT_GT(blended_frames, 2);
+  EXPECT_LT(worst_excess, 0.002);
+}
+
+// A pack the renderer cannot use is an error naming it, not a crash.
+TEST(ViewerTest, InconsistentPackIsReported) {
+  REQUIRE_GL();
+  Pack bad = Get().pack;
+  bad.normals = Grid<Vec3f>(3, 3);
+  auto index = Get().renderer->AddPainting(bad, "broken.pack.exr");
+  ASSERT_FALSE(index.ok());
+  EXPECT_NE(index.error().message.find("broken.pack.exr"), std::string::npos);
+  Pack tiny;
+  tiny.field.height_mm = Grid<float>(1, 1);
+  EXPECT_FALSE(Get().renderer->AddPainting(tiny, "tiny").ok());
+  EXPECT_EQ(Get().renderer->painting_count(), 1);
+}
+
+// Self-shadowing: with shadows on, the viewer's relief modes match the reference with shadows on
+// (same 35 dB bar on 4 x 4 box-filtered images) and are darker than without (shadows appear).
+TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {
+  REQUIRE_GL();
+  const int ss = kCompareSupersampling;
+  // A low light (20 deg above the canvas, from -X) so that the impasto casts long shadows.
+  const Pack& p = Get().pack;
+  Light light;
+  light.type = LightType::kPoint;
+  const double d = 300, e = 20 * 3.14159265358979323846 / 180;
+  light.position_mm =
+      Vec3d(p.width_mm() / 2, p.height_mm() / 2, 0) + d * Vec3d(-std::cos(e), 0, std::sin(e));
+  light.intensity = Vec3f::Constant(float(3.14159265358979323846 * d * d));
+  for (ViewAngle a : {ViewAngle::kFace, ViewAngle::kGrazing}) {
+    const ViewCamera v = View(ViewDistance::kClose, a);
+    const RelitImage ref_ss =
+        RenderReference(*Get().tracer, Get().pack, Supersampled(v, ss), light, true);
+    ASSERT_GT(ref_ss.shadowed_pixels, 0u);
+    const Grid<Vec3f> ref_aa = Downsample(ref_ss.rgb, ss);
+    const Grid<uint8_t> mask_aa = DownsampleMask(ref_ss.mask, ss);
+    for (Technique t : {Technique::kReliefEverywhere, Technique::kHybridAdaptive}) {
+      RenderOptions o = Options(t);
+      o.shadows = true;
+      const Grid<Vec3f> lit = Get().renderer->Render(Supersampled(v, ss), {light}, o).rgb;
+      const Grid<Vec3f> aa = Downsample(lit, ss);
+      const double psnr = CompareImages(aa, ref_aa, mask_aa, kPsnrPeak).psnr_db;
+      const Grid<Vec3f> unlit =
+          Get().renderer->Render(Supersampled(v, ss), {light}, Options(t)).rgb;
+      const double psnr_off =
+          CompareImages(Downsample(unlit, ss), ref_aa, mask_aa, kPsnrPeak).psnr_db;
+      std::printf("close-%s %-9s vs reference with shadows: on %6.2f dB, off %6.2f dB (4x4)\n",
+                  a == ViewAngle::kFace ? "face" : "grazing", ToString(t), psnr, psnr_off);
+      EXPECT_GE(psnr, 35.0);
+      EXPECT_GT(psnr, psnr_off + 3.0);  // the shadows are there, and in the right places
+    }
+  }
+}
+
+std::filesystem::path TempDir() {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("digitize_viewer_test_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+TEST(ViewerTest, CameraPathReadsAndRejectsBadFiles) {
+  const auto dir = TempDir();
+  const auto good = dir / "path.json";
+  ASSERT_TRUE(WriteTextFile(good, R"({"format": "digitize.camera_path", "version": 1,
+    "width": 64, "height": 48, "frames": [
+      {"eye": [0, 0, 1600], "target": [0, 1000, 1500]},
+      {"eye": [100, 0, 1600], "target": [0, 1000, 1500], "up": [0, 0, 1]}]})")
+                  .ok());
+  auto path = ReadCameraPath(good);
+  ASSERT_TRUE(path.ok()) << path.error().message;
+  ASSERT_EQ(path->size(), 2u);
+  EXPECT_EQ((*path)[1].width, 64);
+  const auto bad = dir / "bad.json";
+  ASSERT_TRUE(WriteTextFile(bad, R"({"format": "digitize.camera_path", "version": 1,
+    "frames": [{"eye": [0, 0, 0], "target": [0, 0, 0]}]})")
+                  .ok());
+  auto e = ReadCameraPath(bad);
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().message.find("bad.json: frames[0]"), std::string::npos) << e.error().message;
+  EXPECT_FALSE(ReadCameraPath(dir / "missing.json").ok());
+  ASSERT_TRUE(WriteTextFile(bad, "{not json").ok());
+  EXPECT_FALSE(ReadCameraPath(bad).ok());
+  std::filesystem::remove_all(dir);
+}
+
+// A pack file that does not exist or is not a pack: an error naming it, nothing thrown.
+TEST(ViewerTest, PackThatFailsToLoadIsReported) {
+  const auto dir = TempDir();
+  const auto junk = dir / "junk.pack.exr";
+  ASSERT_TRUE(WriteTextFile(junk, "not an EXR").ok());
+  for (const auto& p : {dir / "missing.pack.exr", junk}) {
+    auto pack = LoadPackForViewer(p);
+    ASSERT_FALSE(pack.ok());
+    EXPECT_NE(pack.error().message.find(p.filename().string()), std::string::npos)
+        << pack.error().message;
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// A pack file written by WritePack and read by the viewer renders like the pack in memory (up to
+// the half-float rounding of the file: measured 89 dB, bound 40 dB).
+TEST(ViewerTest, PackFileRendersLikeThePackInMemory) {
+  REQUIRE_GL();
+  const auto dir = TempDir();
+  const auto path = dir / "synthetic.pack.exr";
+  ASSERT_TRUE(WritePack(path, Get().pack).ok());
+  auto pack = LoadPackForViewer(path);
+  ASSERT_TRUE(pack.ok()) << pack.error().message;
+  auto renderer = Renderer::Create();
+  ASSERT_TRUE(renderer.ok());
+  ASSERT_TRUE((*renderer)->AddPainting(*pack, path.string()).ok());
+  const ViewCamera v = View(ViewDistance::kClose, ViewAngle::kGrazing);
+  const RenderOptions o = Options(Technique::kHybridAdaptive);
+  const Grid<Vec3f> from_file = (*renderer)->Render(v, {Get().light}, o).rgb;
+  const Grid<Vec3f> in_memory = Render(v, o);
+  Grid<uint8_t> all(kW, kH, 1);
+  const double psnr = CompareImages(from_file, in_memory, all, kPsnrPeak).psnr_db;
+  std::printf("pack file vs in memory: %.2f dB\n", psnr);
+  EXPECT_GT(psnr, 40.0);
+  std::filesystem::remove_all(dir);
+}
+
+// The gallery: paintings at their physical size on the back wall, facing into the room.
+TEST(ViewerTest, GalleryHangsPaintingsFacingTheRoom) {
+  const Gallery g = MakeGallery({Eigen::Vector2d(400, 300), Eigen::Vector2d(600, 800)});
+  ASSERT_EQ(g.world_from_canvas.size(), 2u);
+  ASSERT_EQ(g.lights.size(), 2u);
+  for (const RigidTransform& t : g.world_from_canvas) {
+    EXPECT_NEAR(t.rotation.determinant(), 1.0, 1e-12);
+    const Vec3d normal = t.ApplyToDirection(Vec3d::UnitZ());
+    EXPECT_NEAR(normal.y(), -1.0, 1e-12);  // into the room
+    const Vec3d corner = t.Apply(Vec3d(0, 0, 0));
+    EXPECT_GT(corner.x(), 0);
+    EXPECT_LT(corner.x(), g.width_mm);
+    EXPECT_GT(corner.z(), 0);
+  }
+  // Side by side, not overlapping.
+  EXPECT_GT(g.world_from_canvas[1].translation.x(), g.world_from_canvas[0].translation.x() + 400);
+}
+
+// The headless gallery screenshot (what `digitize demo` ends with) shows the painting.
+TEST(ViewerTest, GalleryScreenshotIsWritten) {
+  REQUIRE_GL();
+  const auto dir = TempDir();
+  GalleryShotOptions shot;
+  shot.width = 160;
+  shot.height = 90;
+  const auto png = dir / "gallery.png";
+  const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, png, {}, shot);
+  ASSERT_TRUE(s.ok()) << s.message();
+  auto img = ReadImage(png);
+  ASSERT_TRUE(img.ok()) << img.error().message;
+  EXPECT_EQ(img->width, 160);
+  // Not blank: the painting and the room give a spread of values.
+  const auto [lo, hi] = std::minmax_element(img->pixels.begin(), img->pixels.end());
+  EXPECT_GT(*hi - *lo, 0.3f);
+  // Its own context came and went: the suite's context is current again and still works.
+  ExpectPlausible(
+      Render(View(ViewDistance::kFramed, ViewAngle::kFace), Options(Technique::kHybrid)),
+      "after the gallery screenshot");
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace digitize::viewer

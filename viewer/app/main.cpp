@@ -1,0 +1,310 @@
+// digitize-viewer: opens packs in a virtual gallery (issue 5). A thin program: flags -> options,
+// the library does the work.
+//
+//   digitize-viewer [PACK.pack.exr ...] [--synthetic] [--technique adaptive]
+//                   [--screenshot shot.png [--camera-path path.json] [--size 1280x720]]
+//
+// With a display: a GLFW window (OpenGL 4.5 core), walk with W/A/S/D (Q/E down/up, shift
+// faster), look by dragging with the right mouse button; a Dear ImGui panel for technique,
+// K / eps, screen-space error, box overlay, alpha heat map, lights, frame time and boxes drawn.
+// Without a display (or with --screenshot): headless (EGL surfaceless) screenshots.
+// Packs that fail to load are listed (stderr and the panel); the others are shown.
+#include <epoxy/gl.h>
+// epoxy before GLFW: GLFW must not pull in another GL header.
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <imgui_impl_glfw.h>
+#include <imgui_impl_opengl3.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "digitize/image_io.h"
+#include "digitize_synth/painting.h"
+#include "digitize_synth/truth_pack.h"
+#include "digitize_viewer/gallery.h"
+#include "digitize_viewer/renderer.h"
+
+using namespace digitize;
+using namespace digitize::viewer;
+
+namespace {
+
+struct Walker {  // walk-through camera: position, yaw / pitch (rad), world Z up
+  Vec3d eye;
+  double yaw = 0, pitch = 0;
+  Vec3d Forward() const {
+    return {std::cos(pitch) * std::sin(yaw), std::cos(pitch) * std::cos(yaw), std::sin(pitch)};
+  }
+};
+
+// max_frames > 0: close after that many frames, first writing the window (panel included) to
+// window_shot when given -- how the windowed path is checked under xvfb-run.
+int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
+              std::vector<std::string> errors, RenderOptions options, int max_frames,
+              const std::string& window_shot) {
+  if (!glfwInit()) {
+    std::fprintf(stderr, "digitize-viewer: GLFW cannot initialise (no display?)\n");
+    return 1;
+  }
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
+  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
+  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+  glfwWindowHint(GLFW_SRGB_CAPABLE, GLFW_TRUE);
+  GLFWwindow* window = glfwCreateWindow(1280, 720, "digitize viewer", nullptr, nullptr);
+  if (!window) {
+    std::fprintf(stderr, "digitize-viewer: no OpenGL 4.5 core window\n");
+    glfwTerminate();
+    return 1;
+  }
+  glfwMakeContextCurrent(window);
+  glfwSwapInterval(0);
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  ImGui_ImplGlfw_InitForOpenGL(window, true);
+  ImGui_ImplOpenGL3_Init("#version 450");
+
+  auto renderer = Renderer::Create();
+  if (!renderer) {
+    std::fprintf(stderr, "digitize-viewer: %s\n", renderer.error().message.c_str());
+    return 1;
+  }
+  std::vector<Eigen::Vector2d> sizes;
+  for (const auto& p : packs) sizes.emplace_back(p.second.width_mm(), p.second.height_mm());
+  Gallery g = MakeGallery(sizes);
+  for (size_t i = 0; i < packs.size(); ++i) {
+    auto added = (*renderer)->AddPainting(packs[i].second, packs[i].first, g.world_from_canvas[i]);
+    if (!added) errors.push_back(added.error().message);
+  }
+  (*renderer)->SetSceneBoxes(g.boxes);
+  Walker walker;
+  walker.eye = g.start.eye_mm;
+  const Vec3d f0 = (g.start.target_mm - g.start.eye_mm).normalized();
+  walker.yaw = std::atan2(f0.x(), f0.y());
+  walker.pitch = std::asin(f0.z());
+  double last_x = 0, last_y = 0;
+  bool dragging = false;
+  auto last = std::chrono::steady_clock::now();
+  double frame_ms = 0;
+  FrameStats stats;
+  int technique = int(options.technique);
+  int frame = 0;
+  float exposure_ambient = float(options.ambient);
+
+  while (!glfwWindowShouldClose(window)) {
+    glfwPollEvents();
+    const auto now = std::chrono::steady_clock::now();
+    const double dt = std::chrono::duration<double>(now - last).count();
+    last = now;
+    frame_ms = 0.9 * frame_ms + 0.1 * dt * 1000;
+    ImGuiIO& io = ImGui::GetIO();
+    if (!io.WantCaptureKeyboard) {
+      const double speed = (glfwGetKey(window, GLFW_KEY_LEFT_SHIFT) ? 3000 : 1000) * dt;  // mm/s
+      const Vec3d fwd(std::sin(walker.yaw), std::cos(walker.yaw), 0);
+      const Vec3d right(fwd.y(), -fwd.x(), 0);
+      if (glfwGetKey(window, GLFW_KEY_W)) walker.eye += speed * fwd;
+      if (glfwGetKey(window, GLFW_KEY_S)) walker.eye -= speed * fwd;
+      if (glfwGetKey(window, GLFW_KEY_D)) walker.eye += speed * right;
+      if (glfwGetKey(window, GLFW_KEY_A)) walker.eye -= speed * right;
+      if (glfwGetKey(window, GLFW_KEY_E)) walker.eye.z() += speed;
+      if (glfwGetKey(window, GLFW_KEY_Q)) walker.eye.z() -= speed;
+      if (glfwGetKey(window, GLFW_KEY_ESCAPE)) glfwSetWindowShouldClose(window, 1);
+    }
+    double mx, my;
+    glfwGetCursorPos(window, &mx, &my);
+    const bool right_down = glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_RIGHT) == GLFW_PRESS;
+    if (right_down && !io.WantCaptureMouse) {
+      if (dragging) {
+        walker.yaw += 0.004 * (mx - last_x);
+        walker.pitch = std::clamp(walker.pitch - 0.004 * (my - last_y), -1.5, 1.5);
+      }
+      dragging = true;
+    } else {
+      dragging = false;
+    }
+    last_x = mx;
+    last_y = my;
+    // Keep the walker inside the room.
+    walker.eye.x() = std::clamp(walker.eye.x(), 50.0, g.width_mm - 50);
+    walker.eye.y() = std::clamp(walker.eye.y(), 50.0, g.depth_mm - 50);
+    walker.eye.z() = std::clamp(walker.eye.z(), 50.0, g.height_mm - 50);
+
+    int w, h;
+    glfwGetFramebufferSize(window, &w, &h);
+    if (w > 0 && h > 0) {
+      ViewCamera cam;
+      cam.eye_mm = walker.eye;
+      cam.target_mm = walker.eye + walker.Forward();
+      cam.up = Vec3d::UnitZ();
+      cam.fov_y_deg = 50;
+      cam.width = w;
+      cam.height = h;
+      cam.near_mm = 5;
+      cam.far_mm = 4 * (g.width_mm + g.depth_mm + g.height_mm);
+      options.technique = Technique(technique);
+      options.ambient = exposure_ambient;
+      if (options.Validate().ok() && cam.Validate().ok()) {
+        glBindFramebuffer(GL_FRAMEBUFFER, 0);
+        glEnable(GL_FRAMEBUFFER_SRGB);  // linear radiance -> sRGB on write
+        stats = (*renderer)->Draw(cam, g.lights, options);
+        glDisable(GL_FRAMEBUFFER_SRGB);
+      }
+    }
+
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    ImGui::SetNextWindowSize(ImVec2(440, 620), ImGuiCond_FirstUseEver);
+    ImGui::Begin("digitize viewer");
+    ImGui::Text("%.1f ms/frame (%.0f Hz)", frame_ms, 1000.0 / std::max(frame_ms, 1e-3));
+    ImGui::Text("boxes drawn %d of %d (%d blended)", stats.boxes_drawn, stats.boxes_total,
+                stats.boxes_blended);
+    const char* names[] = {"mesh",   "relief everywhere", "bump",
+                           "hybrid", "hybrid + adaptive", "screen-space error"};
+    ImGui::Combo("technique", &technique, names, 6);
+    float k = float(options.k), emin = float(options.eps_min), emax = float(options.eps_max);
+    float px = float(options.max_error_px);
+    ImGui::SliderFloat("K", &k, 0.1f, 10.0f, "%.2f", ImGuiSliderFlags_Logarithmic);
+    ImGui::SliderFloat("eps min", &emin, 0.0f, 0.05f, "%.4f");
+    ImGui::SliderFloat("eps max", &emax, 0.0001f, 0.1f, "%.4f");
+    ImGui::SliderFloat("max error (px)", &px, 0.1f, 10.0f);
+    options.k = k;
+    options.eps_min = emin;
+    options.eps_max = std::max(emax, emin + 1e-4f);
+    options.max_error_px = px;
+    ImGui::SliderInt("bump parallax steps", &options.bump_parallax_iterations, 0, 8);
+    ImGui::Checkbox("relief self-shadowing", &options.shadows);
+    ImGui::Checkbox("box overlay", &options.show_boxes);
+    ImGui::Checkbox("alpha heat map", &options.alpha_heatmap);
+    ImGui::SliderFloat("ambient", &exposure_ambient, 0.0f, 0.5f);
+    for (size_t i = 0; i < g.lights.size(); ++i) {
+      ImGui::PushID(int(i));
+      float pos[3] = {float(g.lights[i].position_mm.x()), float(g.lights[i].position_mm.y()),
+                      float(g.lights[i].position_mm.z())};
+      if (ImGui::DragFloat3("light (mm)", pos, 10.0f))
+        g.lights[i].position_mm = Vec3d(pos[0], pos[1], pos[2]);
+      float scale = g.lights[i].intensity.x() / 1e6f;
+      if (ImGui::SliderFloat("intensity (1e6)", &scale, 0.0f, 50.0f))
+        g.lights[i].intensity = Vec3f::Constant(scale * 1e6f);
+      ImGui::PopID();
+    }
+    for (const std::string& e : errors)
+      ImGui::TextColored(ImVec4(1, 0.4f, 0.3f, 1), "%s", e.c_str());
+    ImGui::End();
+    ImGui::Render();
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    if (max_frames > 0 && ++frame >= max_frames) {
+      if (!window_shot.empty()) {
+        Grid<std::array<uint8_t, 3>> img(w, h);
+        std::vector<uint8_t> rgb(size_t(w) * h * 3);
+        glPixelStorei(GL_PACK_ALIGNMENT, 1);
+        glReadBuffer(GL_BACK);
+        glReadPixels(0, 0, w, h, GL_RGB, GL_UNSIGNED_BYTE, rgb.data());
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 3; ++c) img(x, y)[c] = rgb[(size_t(h - 1 - y) * w + x) * 3 + c];
+        if (Status s = WritePngRgb8(window_shot, img); !s.ok())
+          std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
+      }
+      glfwSetWindowShouldClose(window, 1);
+    }
+    glfwSwapBuffers(window);
+  }
+  renderer->reset();
+  ImGui_ImplOpenGL3_Shutdown();
+  ImGui_ImplGlfw_Shutdown();
+  ImGui::DestroyContext();
+  glfwDestroyWindow(window);
+  glfwTerminate();
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"digitize-viewer: packs in a virtual gallery (OpenGL 4.5)"};
+  std::vector<std::string> paths;
+  bool synthetic = false;
+  std::string technique = "adaptive", screenshot, camera_path, size = "1280x720", window_shot;
+  int window_frames = 0;
+  app.add_option("packs", paths, "texture packs (.pack.exr)");
+  app.add_flag("--synthetic", synthetic, "also hang a synthetic painting (ground-truth pack)");
+  app.add_option("--technique", technique, "mesh, relief, bump, hybrid, adaptive, screen-error");
+  app.add_option("--screenshot", screenshot, "render headless into this PNG and exit");
+  app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
+  app.add_option("--size", size, "screenshot size WxH");
+  bool heatmap = false, show_boxes = false, shadows = false;
+  app.add_flag("--heatmap", heatmap, "colour relief by its box's alpha (blue 0 .. red 1)");
+  app.add_flag("--show-boxes", show_boxes, "outline the boxes drawn");
+  app.add_flag("--shadows", shadows, "relief self-shadowing");
+  app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
+  app.add_option("--window-shot", window_shot,
+                 "window: write the last frame (panel included) here");
+  CLI11_PARSE(app, argc, argv);
+
+  RenderOptions options;
+  options.ambient = 0.05;
+  auto t = ParseTechnique(technique);
+  if (!t) {
+    std::fprintf(stderr, "digitize-viewer: %s\n", t.error().message.c_str());
+    return 2;
+  }
+  options.technique = *t;
+  options.alpha_heatmap = heatmap;
+  options.show_boxes = show_boxes;
+  options.shadows = shadows;
+
+  std::vector<std::pair<std::string, Pack>> packs;
+  std::vector<std::string> errors;
+  for (const std::string& p : paths) {
+    auto pack = LoadPackForViewer(p);
+    if (pack) {
+      packs.emplace_back(p, std::move(*pack));
+    } else {
+      errors.push_back(pack.error().message);
+      std::fprintf(stderr, "digitize-viewer: %s\n", pack.error().message.c_str());
+    }
+  }
+  if (synthetic || paths.empty()) {
+    synth::PaintingOptions po;
+    po.resolution_px = 768;
+    po.impasto_count = 24;
+    synth::TruthPackOptions tpo;
+    tpo.relief.delta0_fraction = 0.10;
+    packs.emplace_back("synthetic", synth::MakeTruthPack(synth::MakePainting(po), tpo));
+  }
+
+  const bool has_display = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
+  if (!screenshot.empty() || !camera_path.empty() || !has_display) {
+    if (screenshot.empty()) screenshot = "gallery.png";
+    GalleryShotOptions shot;
+    shot.render = options;
+    if (std::sscanf(size.c_str(), "%dx%d", &shot.width, &shot.height) != 2 || shot.width <= 0 ||
+        shot.height <= 0) {
+      std::fprintf(stderr, "digitize-viewer: --size must be WxH, got '%s'\n", size.c_str());
+      return 2;
+    }
+    std::vector<ViewCamera> path;
+    if (!camera_path.empty()) {
+      auto p = ReadCameraPath(camera_path);
+      if (!p) {
+        std::fprintf(stderr, "digitize-viewer: %s\n", p.error().message.c_str());
+        return 1;
+      }
+      path = *p;
+    }
+    if (Status s = RenderGalleryScreenshots(packs, screenshot, path, shot); !s.ok()) {
+      std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
+      return 1;
+    }
+    std::printf("wrote %s (%zu painting(s), %zu failed to load)\n", screenshot.c_str(),
+                packs.size(), errors.size());
+    return errors.empty() ? 0 : 1;
+  }
+  return RunWindow(packs, errors, options, window_frames, window_shot);
+}

@@ -1,0 +1,72 @@
+// The virtual gallery (issue 5): a room (floor, walls, ceiling), packs hung in frames at their
+// physical size on the back wall, point lights in front of them, a starting camera; scripted
+// camera paths (JSON) for screenshots; loading packs for the viewer with errors reported, never
+// thrown; the headless gallery screenshot `digitize demo` ends with.
+//
+// Layer: viewer (libdigitize only). Frames: the gallery's world frame is in mm with Z UP, the
+// floor at Z = 0, the back wall at Y = room depth; a canvas hangs with its X along world +X, its
+// Y along world +Z and its normal (canvas +Z) along world -Y, into the room.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/pack.h"
+#include "digitize/photo_set.h"
+#include "digitize_viewer/renderer.h"
+#include "digitize_viewer/view.h"
+
+namespace digitize::viewer {
+
+struct GalleryOptions {
+  double min_room_width_mm = 6000;  // grown to fit the paintings
+  double room_depth_mm = 6000;
+  double room_height_mm = 3200;
+  double centre_height_mm = 1500;   // canvas centres hang at this height
+  double gap_mm = 1200;             // between frames, and from the side walls
+  double frame_mm = 60;             // frame moulding width
+  double light_distance_mm = 1500;  // each painting's light: this far in front, 30 deg above
+  Status Validate() const;          // every length > 0
+};
+
+struct Gallery {
+  std::vector<SceneBox> boxes;                    // room and frames
+  std::vector<RigidTransform> world_from_canvas;  // one per painting, in the given order
+  std::vector<Light> lights;                      // one point light per painting
+  ViewCamera start;                               // standing in the room, facing the back wall
+  double width_mm = 0, depth_mm = 0, height_mm = 0;
+};
+
+// sizes_mm: each painting's (width, height). Light intensities make a white Lambertian canvas
+// centre read radiance 1 (paper white, as scene_setup.h). An empty list gives the empty room.
+Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm,
+                    const GalleryOptions& options = {});
+
+// Reads a pack for the viewer (ReadPack). The error names the file; nothing is thrown.
+Result<Pack> LoadPackForViewer(const std::filesystem::path& path);
+
+// Camera path, docs/formats.md "Camera paths":
+//   {"format": "digitize.camera_path", "version": 1, "width": 640, "height": 480,
+//    "fov_y_deg": 50, "frames": [{"eye": [x, y, z], "target": [x, y, z], "up": [0, 0, 1]}, ...]}
+// width, height, fov_y_deg and up are optional (640, 480, 50, +Z); every frame is validated.
+// Errors name the file and the frame.
+Result<std::vector<ViewCamera>> ReadCameraPath(const std::filesystem::path& path);
+
+struct GalleryShotOptions {
+  int width = 1280, height = 720;
+  RenderOptions render;  // technique etc.; ambient 0.05 by default for the room
+  double exposure = 1.0;
+  GalleryShotOptions() { render.ambient = 0.05; }
+};
+
+// Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
+// camera of `path` when given, written as out_png with _NNN before the extension) and writes
+// 8-bit sRGB PNGs. Errors: no GL context, a pack the renderer refuses (named), the PNG write.
+Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
+                                const std::filesystem::path& out_png,
+                                const std::vector<ViewCamera>& path = {},
+                                const GalleryShotOptions& options = {});
+
+}  // namespace digitize::viewer

@@ -1,0 +1,172 @@
+// The real-time painting renderer (issue 5; SPEC step 8; paper 001 section 5): the canvas as a
+// plane at the bump level delta0 with bump mapping, the significant relief as the pack's boxes,
+// each relief-mapped (Policarpo et al. 2005: linear search, then binary refinement, along the
+// view ray between the box's entry and exit points), blended per box by the paper's adaptive
+// alpha -- plus the comparison techniques of the paper's Table 1 and a screen-space-error rule.
+//
+// Layer: viewer (libdigitize only). GL types stay in renderer.cpp; an OpenGL 4.5 core context
+// must be current on the calling thread for every call (HeadlessContext or a GLFW window).
+//
+// SHADING (shared by every technique, so transitions do not pop, and identical to RenderRelit so
+// every image has a measurable error against the Embree reference):
+//   - the shading point P is the technique's surface point in the canvas frame (mm);
+//   - texel = nearest texel of P's continuous texel coordinates (per-texel reflectance; texels
+//     kOutside are black), normal = bilinear interpolation of the pack's normals at P,
+//     renormalised, tangent frame as tangent_frame.h (cz = 1 gauge of the pack's lobes);
+//   - v = towards the eye from P, l = towards each point light from P, E = I / |light - P|^2,
+//     radiance = sum over lights of f_r(v, l) max(0, n.l) E  (0 where n.v <= 0), plus
+//     `ambient` x rho_d (0 by default: the reference has no ambient term);
+//   - with `shadows`, a light whose ray from P is blocked by the height field contributes 0;
+//   - output: linear radiance (RGBA32F target), no tone mapping.
+// Techniques differ only in P:
+//   kBump: P = (xy, h(xy)) where xy is where the view ray meets the plane z = delta0 (the view and
+//     light vectors are "corrected by the height", paper 5.4); with bump_parallax_iterations > 0,
+//     xy is moved along the ray towards the surface by that many fixed-point steps (parallax
+//     mapping; 0 = the paper's bump). The plane is the top of a slab whose sides reach down to
+//     the lowest texel, so the canvas outline stays where the true surface's is at grazing views;
+//     a ray whose corrected point falls outside the canvas draws nothing (as the reference);
+//   relief (inside a box): P = the first intersection of the view ray with the bilinearly
+//     interpolated height field between the box's entry and exit points (linear search with
+//     steps of linear_step_texels texels along the ray's footprint, at most max_linear_steps,
+//     then binary_steps bisections); a ray that leaves the box without a hit draws nothing (the
+//     bump plane or another box shows there);
+//   kMesh: P = the rasterised triangle mesh of the height field (one vertex per texel centre,
+//     extended to the canvas outline like the tracer), optionally simplified (MeshOptions).
+// Per box alpha (kHybridAdaptive): I = (u_max, v_max, h_max), B = the projection of I on the
+// bump plane along the view ray, C = the eye, r = |IB| / |CI|; alpha = 0 if K r < eps_min, 1 if
+// K r > eps_max, else (K r - eps_min) / (eps_max - eps_min) (a camera at or below h_max: alpha 1).
+// kScreenSpaceError: e = the on-screen length (px) of the segment from I down to the bump plane
+// (how far the bump plane displaces I's texel); alpha ramps from 0 at max_error_px / 2 to 1 at
+// max_error_px. alpha 0: box not drawn; 1: opaque; between: blended over the bump plane.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/pack.h"
+#include "digitize/photo_set.h"
+#include "digitize_viewer/view.h"
+
+namespace digitize::viewer {
+
+enum class Technique {
+  kMesh,              // the height field's triangle mesh (OpenMesh; full or simplified)
+  kReliefEverywhere,  // one box over the whole canvas, from its lowest to its highest point
+  kBump,              // the plane at delta0 only
+  kHybrid,            // bump plane + every box relief-mapped, opaque
+  kHybridAdaptive,    // bump plane + boxes by the paper's K / eps rule
+  kScreenSpaceError,  // bump plane + boxes whose parallax error exceeds max_error_px
+};
+inline constexpr Technique kAllTechniques[] = {
+    Technique::kMesh,   Technique::kReliefEverywhere, Technique::kBump,
+    Technique::kHybrid, Technique::kHybridAdaptive,   Technique::kScreenSpaceError};
+// "mesh", "relief", "bump", "hybrid", "adaptive", "screen-error"
+const char* ToString(Technique t);
+Result<Technique> ParseTechnique(std::string_view name);
+
+struct RenderOptions {
+  Technique technique = Technique::kHybridAdaptive;
+  // Adaptive rule (paper eq. 2). r is dimensionless (a ratio of lengths); with K = 1, eps_min =
+  // 0.004 and eps_max = 0.008 a 1.75 mm-high impasto appears (alpha > 0) once the camera is
+  // closer than ~44 cm above the bump plane and is fully relief-mapped below ~22 cm.
+  double k = 1.0;
+  double eps_min = 0.004, eps_max = 0.008;
+  double max_error_px = 1.0;  // kScreenSpaceError: parallax error (px) at which a box is opaque
+  // Relief mapping.
+  double linear_step_texels = 1.0;  // linear-search step along the ray's footprint, texels
+  int max_linear_steps = 256;       // cap per ray (a grazing ray over a whole canvas)
+  int min_linear_steps = 16;        // floor per ray (a ray almost along the normal: with 4, steps
+                                    // of H / 4 skipped the tips of glossy blobs, 15 dB at far-face)
+  int binary_steps = 6;             // bisections after the linear search
+  // The bump plane's texture lookup: fixed-point steps moving the plane point along the view
+  // ray to where it meets the height field (parallax mapping). 0 = the paper's plain bump mapping
+  // (texel under the plane point); 4 removes most of the plane's offset from the true canvas
+  // (delta0 above it): framed face view 27 -> 52 dB against the reference (point-sampled,
+  // docs/benchmarks.md).
+  int bump_parallax_iterations = 4;
+  double ambient = 0;  // ambient radiance factor x rho_d (gallery look; 0 = none)
+  // Relief self-shadowing: per shading point and light, a march through the height field towards
+  // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
+  // Off by default, as in the paper; RenderRelit with shadows on is its reference.
+  bool shadows = false;
+  // Debug views (the gallery's panel).
+  bool alpha_heatmap = false;  // colour relief fragments by their box's alpha (blue 0 .. red 1),
+                               // the bump plane dark grey
+  bool show_boxes = false;     // draw the drawn boxes' edges (yellow)
+
+  // Finite, k > 0, 0 <= eps_min < eps_max, max_error_px > 0, steps in range.
+  Status Validate() const;
+};
+
+// Simplification of the height-field mesh (kMesh).
+struct MeshOptions {
+  size_t max_triangles = 0;  // 0 = full resolution (2 (w + 1) (h + 1) triangles); else the
+                             // OpenMesh quadric decimater reduces the mesh to at most this many
+};
+
+struct FrameStats {
+  int boxes_total = 0;        // boxes of the drawn paintings
+  int boxes_drawn = 0;        // alpha > 0
+  int boxes_blended = 0;      // 0 < alpha < 1
+  size_t mesh_triangles = 0;  // kMesh: triangles drawn
+  double cpu_ms = 0;          // CPU time to issue the frame (GL is asynchronous: see the bench)
+};
+
+struct RenderedImage {
+  Grid<Vec3f> rgb;  // linear radiance, row 0 = top (as RenderRelit), never NaN/Inf (checked)
+  FrameStats stats;
+  double ms = 0;  // Draw + glFinish, steady clock
+};
+
+// A wall, floor or frame of the gallery: an axis-aligned box in the world frame, Lambertian.
+struct SceneBox {
+  Vec3d min_mm = Vec3d::Zero(), max_mm = Vec3d::Zero();
+  Vec3f albedo = Vec3f::Constant(0.5f);
+};
+
+class Renderer {
+ public:
+  // Compiles the shaders. Errors: no OpenGL 4.5 context current, a shader that does not compile
+  // (the GL log in the message).
+  static Result<std::unique_ptr<Renderer>> Create();
+  ~Renderer();
+  Renderer(const Renderer&) = delete;
+  Renderer& operator=(const Renderer&) = delete;
+
+  // Uploads a pack (textures, boxes) placed in the world by world_from_canvas. Errors (`name`
+  // says which pack): empty or inconsistent maps, fewer than 2 x 2 texels, textures over the GL
+  // limit. Returns the painting's index.
+  Result<int> AddPainting(const Pack& pack, const std::string& name,
+                          const RigidTransform& world_from_canvas = {},
+                          const MeshOptions& mesh = {});
+  int painting_count() const;
+  void SetSceneBoxes(const std::vector<SceneBox>& boxes);  // the room; empty = none
+
+  // Draws everything into the currently bound framebuffer (viewport = camera size), clearing it
+  // to black. Point lights only (directional lights are ignored), at most kMaxLights.
+  FrameStats Draw(const ViewCamera& camera, const std::vector<Light>& lights,
+                  const RenderOptions& options);
+  // Draws into an internal float framebuffer and reads it back. Throws InvariantError on invalid
+  // options or camera (the caller's code).
+  RenderedImage Render(const ViewCamera& camera, const std::vector<Light>& lights,
+                       const RenderOptions& options);
+
+  // Per-box alpha of painting `index` for this camera and options (what Draw uses).
+  std::vector<float> BoxAlphas(int index, const ViewCamera& camera,
+                               const RenderOptions& options) const;
+
+  static constexpr int kMaxLights = 8;
+
+ private:
+  Renderer();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Linear radiance -> 8-bit sRGB (exposure multiplies first; clamped). For screenshots.
+Grid<std::array<uint8_t, 3>> ToneMap(const Grid<Vec3f>& rgb, double exposure = 1.0);
+
+}  // namespace digitize::viewer

@@ -1,0 +1,689 @@
+// The renderer (contract in renderer.h). GL objects are created here only; every call needs the
+// context the Renderer was created in.
+#include "digitize_viewer/renderer.h"
+
+#include <epoxy/gl.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+
+#include "height_mesh.h"
+#include "shaders.h"
+
+namespace digitize::viewer {
+namespace {
+
+using Mat4d = Eigen::Matrix4d;
+using Mat4f = Eigen::Matrix4f;
+
+Mat4d Homogeneous(const RigidTransform& t) {
+  Mat4d m = Mat4d::Identity();
+  m.block<3, 3>(0, 0) = t.rotation;
+  m.block<3, 1>(0, 3) = t.translation;
+  return m;
+}
+
+// Clip space of the pinhole camera: NDC x = (2u + 1) / w - 1, y = 1 - (2v + 1) / h for pixel
+// (u, v) of the OpenCV projection, so GL's pixel centres are the reference's pixel centres; depth
+// maps [near, far] to [-1, 1].
+Mat4d ClipFromWorld(const ViewCamera& view) {
+  const Camera cam = ToCamera(view);
+  const double w = cam.width, h = cam.height, n = view.near_mm, f = view.far_mm;
+  Mat4d p = Mat4d::Zero();
+  p(0, 0) = 2 * cam.fx / w;
+  p(0, 2) = (2 * cam.cx + 1) / w - 1;
+  p(1, 1) = -2 * cam.fy / h;
+  p(1, 2) = 1 - (2 * cam.cy + 1) / h;
+  p(2, 2) = (f + n) / (f - n);
+  p(2, 3) = -2 * f * n / (f - n);
+  p(3, 2) = 1;
+  return p * Homogeneous(cam.camera_from_scan);
+}
+
+Result<GLuint> Compile(GLenum type, const std::string& source, const char* what) {
+  const GLuint s = glCreateShader(type);
+  const char* src = source.c_str();
+  glShaderSource(s, 1, &src, nullptr);
+  glCompileShader(s);
+  GLint ok = 0;
+  glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[4096] = {0};
+    glGetShaderInfoLog(s, sizeof(log), nullptr, log);
+    glDeleteShader(s);
+    return Error{std::string("viewer: shader ") + what + " does not compile: " + log};
+  }
+  return s;
+}
+
+Result<GLuint> Link(const std::string& vs, const std::string& fs, const char* what) {
+  auto v = Compile(GL_VERTEX_SHADER, vs, what);
+  if (!v) return v.error();
+  auto f = Compile(GL_FRAGMENT_SHADER, fs, what);
+  if (!f) {
+    glDeleteShader(*v);
+    return f.error();
+  }
+  const GLuint p = glCreateProgram();
+  glAttachShader(p, *v);
+  glAttachShader(p, *f);
+  glLinkProgram(p);
+  glDeleteShader(*v);
+  glDeleteShader(*f);
+  GLint ok = 0;
+  glGetProgramiv(p, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char log[4096] = {0};
+    glGetProgramInfoLog(p, sizeof(log), nullptr, log);
+    glDeleteProgram(p);
+    return Error{std::string("viewer: program ") + what + " does not link: " + log};
+  }
+  return p;
+}
+
+// Unit cube [0, 1]^3: 36 vertices (corner, outward normal), each triangle counter-clockwise seen
+// from outside (checked by construction: flipped when its normal points inwards).
+std::vector<float> CubeTriangles() {
+  std::vector<float> out;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int side = 0; side < 2; ++side) {
+      Eigen::Vector3f normal = Eigen::Vector3f::Zero();
+      normal[axis] = side ? 1.0f : -1.0f;
+      const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+      std::array<Eigen::Vector3f, 4> q;
+      for (int k = 0; k < 4; ++k) {
+        q[k][axis] = float(side);
+        q[k][a1] = float(k == 1 || k == 2);
+        q[k][a2] = float(k >= 2);
+      }
+      for (const auto& tri : {std::array<int, 3>{0, 1, 2}, std::array<int, 3>{0, 2, 3}}) {
+        std::array<Eigen::Vector3f, 3> t = {q[tri[0]], q[tri[1]], q[tri[2]]};
+        if ((t[1] - t[0]).cross(t[2] - t[0]).dot(normal) < 0) std::swap(t[1], t[2]);
+        for (const auto& v : t)
+          out.insert(out.end(), {v.x(), v.y(), v.z(), normal.x(), normal.y(), normal.z()});
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<float> CubeEdges() {  // 12 edges as 24 line vertices (corner, zero normal)
+  std::vector<float> out;
+  for (int a = 0; a < 8; ++a)
+    for (int bit = 0; bit < 3; ++bit)
+      if (!(a & (1 << bit))) {
+        const int b = a | (1 << bit);
+        for (int c : {a, b})
+          out.insert(out.end(), {float(c & 1), float((c >> 1) & 1), float((c >> 2) & 1), 0, 0, 0});
+      }
+  return out;
+}
+
+std::string Size(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
+
+GLuint MakeTexture(int w, int h, const std::vector<float>& rgba, bool linear) {
+  GLuint t = 0;
+  glCreateTextures(GL_TEXTURE_2D, 1, &t);
+  glTextureStorage2D(t, 1, GL_RGBA32F, w, h);
+  glTextureSubImage2D(t, 0, 0, 0, w, h, GL_RGBA, GL_FLOAT, rgba.data());
+  const GLint filter = linear ? GL_LINEAR : GL_NEAREST;
+  glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, filter);
+  glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, filter);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  return t;
+}
+
+struct Painting {
+  std::string name;
+  RigidTransform world_from_canvas;
+  int texels_w = 0, texels_h = 0;
+  double pitch_mm = 0, width_mm = 0, height_mm = 0;
+  double delta0_mm = 0, max_height_mm = 0, min_height_mm = 0;
+  std::vector<ReliefBox> boxes;
+  std::vector<Vec3d> box_top;  // I per box, canvas frame
+  GLuint textures[4] = {0, 0, 0, 0};
+  // Mesh, built on first use (decimation can take seconds).
+  MeshOptions mesh_options;
+  HeightField field;  // kept for the mesh only until it is built
+  bool mesh_built = false;
+  GLuint mesh_vao = 0, mesh_vbo = 0, mesh_ibo = 0;
+  size_t mesh_triangles = 0;
+};
+
+}  // namespace
+
+const char* ToString(Technique t) {
+  switch (t) {
+    case Technique::kMesh:
+      return "mesh";
+    case Technique::kReliefEverywhere:
+      return "relief";
+    case Technique::kBump:
+      return "bump";
+    case Technique::kHybrid:
+      return "hybrid";
+    case Technique::kHybridAdaptive:
+      return "adaptive";
+    case Technique::kScreenSpaceError:
+      return "screen-error";
+  }
+  return "?";
+}
+
+Result<Technique> ParseTechnique(std::string_view name) {
+  for (Technique t : kAllTechniques)
+    if (name == ToString(t)) return t;
+  return Error{"unknown technique '" + std::string(name) +
+               "' (mesh, relief, bump, hybrid, adaptive, screen-error)"};
+}
+
+Status RenderOptions::Validate() const {
+  auto finite = [](double v) { return std::isfinite(v); };
+  if (!finite(k) || k <= 0) return Error{"k must be finite and > 0, got " + FormatNumber(k)};
+  if (!finite(eps_min) || !finite(eps_max) || eps_min < 0 || eps_max <= eps_min)
+    return Error{"need 0 <= eps_min < eps_max, got " + FormatNumber(eps_min) + ", " +
+                 FormatNumber(eps_max)};
+  if (!finite(max_error_px) || max_error_px <= 0)
+    return Error{"max_error_px must be > 0, got " + FormatNumber(max_error_px)};
+  if (!finite(linear_step_texels) || linear_step_texels <= 0)
+    return Error{"linear_step_texels must be > 0, got " + FormatNumber(linear_step_texels)};
+  if (min_linear_steps < 1 || max_linear_steps < min_linear_steps || max_linear_steps > 4096)
+    return Error{"need 1 <= min_linear_steps <= max_linear_steps <= 4096, got " +
+                 std::to_string(min_linear_steps) + ", " + std::to_string(max_linear_steps)};
+  if (binary_steps < 0 || binary_steps > 32)
+    return Error{"binary_steps must be in [0, 32], got " + std::to_string(binary_steps)};
+  if (bump_parallax_iterations < 0 || bump_parallax_iterations > 32)
+    return Error{"bump_parallax_iterations must be in [0, 32], got " +
+                 std::to_string(bump_parallax_iterations)};
+  if (!finite(ambient) || ambient < 0)
+    return Error{"ambient must be >= 0, got " + FormatNumber(ambient)};
+  return Status::Ok();
+}
+
+struct Renderer::Impl {
+  GLuint plane_program = 0, box_program = 0, mesh_program = 0, scene_program = 0;
+  GLuint empty_vao = 0;
+  GLuint cube_vbo = 0, edge_vbo = 0;
+  GLuint box_vao = 0, box_instances = 0;      // relief boxes
+  GLuint scene_vao = 0, scene_instances = 0;  // room
+  GLuint edge_vao = 0, edge_instances = 0;    // box outlines
+  size_t scene_count = 0;
+  std::vector<Painting> paintings;
+  // Offscreen target.
+  GLuint fbo = 0, colour = 0, depth = 0;
+  int fbo_w = 0, fbo_h = 0;
+
+  ~Impl() {
+    for (Painting& p : paintings) {
+      glDeleteTextures(4, p.textures);
+      if (p.mesh_built) {
+        glDeleteVertexArrays(1, &p.mesh_vao);
+        glDeleteBuffers(1, &p.mesh_vbo);
+        glDeleteBuffers(1, &p.mesh_ibo);
+      }
+    }
+    for (GLuint prog : {plane_program, box_program, mesh_program, scene_program})
+      if (prog) glDeleteProgram(prog);
+    const GLuint vaos[] = {empty_vao, box_vao, scene_vao, edge_vao};
+    glDeleteVertexArrays(4, vaos);
+    const GLuint bufs[] = {cube_vbo, edge_vbo, box_instances, scene_instances, edge_instances};
+    glDeleteBuffers(5, bufs);
+    DeleteTarget();
+  }
+  void DeleteTarget() {
+    if (fbo) glDeleteFramebuffers(1, &fbo);
+    if (colour) glDeleteTextures(1, &colour);
+    if (depth) glDeleteRenderbuffers(1, &depth);
+    fbo = colour = depth = 0;
+  }
+  void EnsureTarget(int w, int h) {
+    if (fbo && fbo_w == w && fbo_h == h) return;
+    DeleteTarget();
+    glCreateFramebuffers(1, &fbo);
+    glCreateTextures(GL_TEXTURE_2D, 1, &colour);
+    glTextureStorage2D(colour, 1, GL_RGBA32F, w, h);
+    glCreateRenderbuffers(1, &depth);
+    glNamedRenderbufferStorage(depth, GL_DEPTH_COMPONENT32F, w, h);
+    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, colour, 0);
+    glNamedFramebufferRenderbuffer(fbo, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth);
+    DIGITIZE_CHECK(glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE,
+                   "viewer: the float framebuffer is incomplete");
+    fbo_w = w;
+    fbo_h = h;
+  }
+
+  // A VAO reading (corner, normal) per vertex from `vbo` and `instance_floats` floats per
+  // instance from `instances`: locations 2, 3 (vec3 min, max) and 4 (alpha or albedo).
+  static GLuint MakeInstancedVao(GLuint vbo, GLuint instances, int last_components) {
+    GLuint vao = 0;
+    glCreateVertexArrays(1, &vao);
+    glVertexArrayVertexBuffer(vao, 0, vbo, 0, 6 * sizeof(float));
+    glVertexArrayVertexBuffer(vao, 1, instances, 0, (6 + last_components) * sizeof(float));
+    glVertexArrayBindingDivisor(vao, 1, 1);
+    auto attrib = [&](GLuint loc, GLuint binding, int comps, int offset_floats) {
+      glEnableVertexArrayAttrib(vao, loc);
+      glVertexArrayAttribFormat(vao, loc, comps, GL_FLOAT, GL_FALSE, offset_floats * sizeof(float));
+      glVertexArrayAttribBinding(vao, loc, binding);
+    };
+    attrib(0, 0, 3, 0);
+    attrib(1, 0, 3, 3);
+    attrib(2, 1, 3, 0);
+    attrib(3, 1, 3, 3);
+    attrib(4, 1, last_components, 6);
+    return vao;
+  }
+
+  void BuildMesh(Painting& p) {
+    const HeightMesh mesh = BuildHeightMesh(p.field, p.mesh_options.max_triangles);
+    glCreateBuffers(1, &p.mesh_vbo);
+    glNamedBufferStorage(p.mesh_vbo, mesh.positions.size() * sizeof(float), mesh.positions.data(),
+                         0);
+    glCreateBuffers(1, &p.mesh_ibo);
+    glNamedBufferStorage(p.mesh_ibo, mesh.indices.size() * sizeof(uint32_t), mesh.indices.data(),
+                         0);
+    glCreateVertexArrays(1, &p.mesh_vao);
+    glVertexArrayVertexBuffer(p.mesh_vao, 0, p.mesh_vbo, 0, 3 * sizeof(float));
+    glVertexArrayElementBuffer(p.mesh_vao, p.mesh_ibo);
+    glEnableVertexArrayAttrib(p.mesh_vao, 0);
+    glVertexArrayAttribFormat(p.mesh_vao, 0, 3, GL_FLOAT, GL_FALSE, 0);
+    glVertexArrayAttribBinding(p.mesh_vao, 0, 0);
+    p.mesh_triangles = mesh.triangles();
+    p.mesh_built = true;
+    p.field = HeightField{};  // no longer needed
+  }
+};
+
+Renderer::Renderer() : impl_(std::make_unique<Impl>()) {}
+Renderer::~Renderer() = default;
+
+Result<std::unique_ptr<Renderer>> Renderer::Create() {
+  if (epoxy_gl_version() < 45)
+    return Error{"viewer: OpenGL 4.5 is needed, the current context has " +
+                 std::to_string(epoxy_gl_version() / 10) + "." +
+                 std::to_string(epoxy_gl_version() % 10)};
+  std::unique_ptr<Renderer> r(new Renderer());
+  Impl& m = *r->impl_;
+  const std::string common = shaders::kCommon;
+  auto plane = Link(shaders::kPlaneVertex, common + shaders::kPlaneFragment, "bump plane");
+  if (!plane) return plane.error();
+  m.plane_program = *plane;
+  auto box = Link(shaders::kBoxVertex, common + shaders::kBoxFragment, "relief box");
+  if (!box) return box.error();
+  m.box_program = *box;
+  auto mesh = Link(shaders::kMeshVertex, common + shaders::kMeshFragment, "mesh");
+  if (!mesh) return mesh.error();
+  m.mesh_program = *mesh;
+  auto scene = Link(shaders::kSceneVertex, shaders::kSceneFragment, "scene");
+  if (!scene) return scene.error();
+  m.scene_program = *scene;
+
+  glCreateVertexArrays(1, &m.empty_vao);
+  const std::vector<float> cube = CubeTriangles(), edges = CubeEdges();
+  glCreateBuffers(1, &m.cube_vbo);
+  glNamedBufferStorage(m.cube_vbo, cube.size() * sizeof(float), cube.data(), 0);
+  glCreateBuffers(1, &m.edge_vbo);
+  glNamedBufferStorage(m.edge_vbo, edges.size() * sizeof(float), edges.data(), 0);
+  glCreateBuffers(1, &m.box_instances);
+  glCreateBuffers(1, &m.scene_instances);
+  glCreateBuffers(1, &m.edge_instances);
+  m.box_vao = Impl::MakeInstancedVao(m.cube_vbo, m.box_instances, 1);
+  m.scene_vao = Impl::MakeInstancedVao(m.cube_vbo, m.scene_instances, 3);
+  m.edge_vao = Impl::MakeInstancedVao(m.edge_vbo, m.edge_instances, 3);
+  if (GLenum e = glGetError(); e != GL_NO_ERROR)
+    return Error{"viewer: OpenGL error " + std::to_string(e) + " while setting up"};
+  return r;
+}
+
+int Renderer::painting_count() const { return int(impl_->paintings.size()); }
+
+Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
+                                  const RigidTransform& world_from_canvas,
+                                  const MeshOptions& mesh) {
+  const int w = pack.width(), h = pack.height();
+  auto fail = [&](const std::string& what) { return Error{name + ": " + what}; };
+  if (w < 2 || h < 2) return fail("the pack has " + Size(w, h) + " texels; at least 2x2 needed");
+  if (pack.field.state.width != w || pack.field.state.height != h || pack.normals.width != w ||
+      pack.normals.height != h || pack.maps.rho_d.width != w || pack.maps.rho_d.height != h ||
+      pack.maps.rho_s.width != w || pack.maps.rho_s.height != h || pack.maps.lobe.width != w ||
+      pack.maps.lobe.height != h)
+    return fail("maps differ in size from the " + Size(w, h) + " height field");
+  if (!(pack.field.pitch_mm > 0) || !std::isfinite(pack.field.pitch_mm))
+    return fail("pitch_mm must be > 0, got " + FormatNumber(pack.field.pitch_mm));
+  GLint max_size = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
+  if (w > max_size || h > max_size)
+    return fail(Size(w, h) + " texels exceed the GL texture limit " + std::to_string(max_size));
+
+  Painting p;
+  p.name = name;
+  p.world_from_canvas = world_from_canvas;
+  p.texels_w = w;
+  p.texels_h = h;
+  p.pitch_mm = pack.field.pitch_mm;
+  p.width_mm = pack.width_mm();
+  p.height_mm = pack.height_mm();
+  p.delta0_mm = pack.delta0_mm;
+  p.max_height_mm = pack.max_height_mm;
+  p.boxes = pack.boxes;
+  const size_t n = size_t(w) * h;
+  std::vector<float> surface(4 * n), rho_d(4 * n), rho_s(4 * n), lobe(4 * n);
+  float min_h = std::numeric_limits<float>::infinity(), max_h = -min_h;
+  for (size_t i = 0; i < n; ++i) {
+    const float hh = pack.field.height_mm.data[i];
+    const Vec3f& nn = pack.normals.data[i];
+    if (!std::isfinite(hh) || !nn.allFinite())
+      return fail("non-finite height or normal at texel " + std::to_string(i % w) + ", " +
+                  std::to_string(i / w));
+    min_h = std::min(min_h, hh);
+    max_h = std::max(max_h, hh);
+    const bool inside = pack.field.state.data[i] != TexelState::kOutside;
+    const Vec3f& d = pack.maps.rho_d.data[i];
+    const Vec3f& s = pack.maps.rho_s.data[i];
+    const auto& c = pack.maps.lobe.data[i];
+    for (int k = 0; k < 3; ++k) {
+      surface[4 * i + k] = nn[k];
+      rho_d[4 * i + k] = d[k];
+      rho_s[4 * i + k] = s[k];
+    }
+    surface[4 * i + 3] = hh;
+    rho_d[4 * i + 3] = inside ? 1.0f : 0.0f;
+    for (int k = 0; k < 4; ++k) lobe[4 * i + k] = c[k];
+  }
+  p.min_height_mm = min_h;
+  // A pack whose H is below its highest texel would let the relief poke out of the boxes.
+  p.max_height_mm = std::max<double>(p.max_height_mm, max_h);
+  for (const ReliefBox& b : p.boxes) {
+    if (b.x0 < 0 || b.y0 < 0 || b.width <= 0 || b.height <= 0 || b.x0 + b.width > w ||
+        b.y0 + b.height > h)
+      return fail("a relief box lies outside the " + Size(w, h) + " grid");
+    const Eigen::Vector2d xy = pack.field.TexelCentreMm(b.u_max, b.v_max);
+    p.box_top.emplace_back(xy.x(), xy.y(), b.h_max_mm);
+  }
+  p.textures[0] = MakeTexture(w, h, surface, true);
+  p.textures[1] = MakeTexture(w, h, rho_d, false);
+  p.textures[2] = MakeTexture(w, h, rho_s, false);
+  p.textures[3] = MakeTexture(w, h, lobe, false);
+  p.mesh_options = mesh;
+  p.field = pack.field;
+  if (GLenum e = glGetError(); e != GL_NO_ERROR) {
+    glDeleteTextures(4, p.textures);
+    return fail("OpenGL error " + std::to_string(e) + " while uploading the textures");
+  }
+  impl_->paintings.push_back(std::move(p));
+  return int(impl_->paintings.size()) - 1;
+}
+
+void Renderer::SetSceneBoxes(const std::vector<SceneBox>& boxes) {
+  std::vector<float> data;
+  for (const SceneBox& b : boxes)
+    data.insert(data.end(), {float(b.min_mm.x()), float(b.min_mm.y()), float(b.min_mm.z()),
+                             float(b.max_mm.x()), float(b.max_mm.y()), float(b.max_mm.z()),
+                             b.albedo.x(), b.albedo.y(), b.albedo.z()});
+  glNamedBufferData(impl_->scene_instances, data.size() * sizeof(float), data.data(),
+                    GL_STATIC_DRAW);
+  impl_->scene_count = boxes.size();
+}
+
+std::vector<float> Renderer::BoxAlphas(int index, const ViewCamera& camera,
+                                       const RenderOptions& options) const {
+  const Painting& p = impl_->paintings.at(index);
+  std::vector<float> alpha(p.boxes.size(), 0.0f);
+  const Technique t = options.technique;
+  if (t == Technique::kHybrid) std::fill(alpha.begin(), alpha.end(), 1.0f);
+  if (t != Technique::kHybridAdaptive && t != Technique::kScreenSpaceError) return alpha;
+  const RigidTransform canvas_from_world = p.world_from_canvas.Inverse();
+  const Vec3d eye = canvas_from_world.Apply(camera.eye_mm);
+  const Camera cam = ToCamera(camera);
+  for (size_t i = 0; i < p.boxes.size(); ++i) {
+    const Vec3d& top = p.box_top[i];
+    double a = 1.0;
+    if (t == Technique::kHybridAdaptive) {
+      // r = |IB| / |CI| with B on the plane z = delta0 along C -> I: r = (h - delta0) / (Cz - h).
+      if (eye.z() > top.z() + 1e-9) {
+        const double r = (top.z() - p.delta0_mm) / (eye.z() - top.z());
+        const double kr = options.k * r;
+        a = kr < options.eps_min   ? 0.0
+            : kr > options.eps_max ? 1.0
+                                   : (kr - options.eps_min) / (options.eps_max - options.eps_min);
+      }
+    } else {
+      // On-screen length of I's drop to the bump plane: how far the bump plane moves its texel.
+      const Vec3d i_world = p.world_from_canvas.Apply(top);
+      const Vec3d b_world =
+          p.world_from_canvas.Apply(Vec3d(top.x(), top.y(), std::min(top.z(), p.delta0_mm)));
+      if (!cam.InFront(i_world) && !cam.InFront(b_world)) {
+        a = 0.0;
+      } else if (cam.InFront(i_world) && cam.InFront(b_world)) {
+        const double e = (cam.Project(i_world) - cam.Project(b_world)).norm();
+        const double lo = 0.5 * options.max_error_px, hi = options.max_error_px;
+        a = std::clamp((e - lo) / (hi - lo), 0.0, 1.0);
+      }
+    }
+    alpha[i] = float(a);
+  }
+  return alpha;
+}
+
+FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& lights,
+                          const RenderOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  Impl& m = *impl_;
+  FrameStats stats;
+  glViewport(0, 0, camera.width, camera.height);
+  glClearColor(0, 0, 0, 1);
+  glClearDepth(1.0);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  glDisable(GL_BLEND);
+  glDisable(GL_CULL_FACE);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  const Mat4d clip_from_world = ClipFromWorld(camera);
+
+  std::vector<Vec3d> light_pos;
+  std::vector<Vec3f> light_int;
+  for (const Light& l : lights) {
+    if (l.type != LightType::kPoint || int(light_pos.size()) == kMaxLights) continue;
+    light_pos.push_back(l.position_mm);
+    light_int.push_back(l.intensity);
+  }
+  auto set_lights = [&](GLuint prog, const RigidTransform& frame_from_world) {
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_num_lights"), int(light_pos.size()));
+    for (size_t i = 0; i < light_pos.size(); ++i) {
+      const Vec3f pos = frame_from_world.Apply(light_pos[i]).cast<float>();
+      const std::string idx = "[" + std::to_string(i) + "]";
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, ("u_light_pos" + idx).c_str()), 1,
+                          pos.data());
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, ("u_light_int" + idx).c_str()), 1,
+                          light_int[i].data());
+    }
+  };
+  auto set_mat = [](GLuint prog, const char* name, const Mat4d& mat) {
+    const Mat4f f = mat.cast<float>();  // column-major, as GL expects
+    glProgramUniformMatrix4fv(prog, glGetUniformLocation(prog, name), 1, GL_FALSE, f.data());
+  };
+
+  // The room.
+  if (m.scene_count > 0) {
+    const GLuint prog = m.scene_program;
+    glUseProgram(prog);
+    set_mat(prog, "u_clip_from_model", clip_from_world);
+    const Vec3f eye = camera.eye_mm.cast<float>();
+    glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_eye"), 1, eye.data());
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_ambient"), float(options.ambient));
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_flat"), 0);
+    set_lights(prog, RigidTransform{});
+    glBindVertexArray(m.scene_vao);
+    glDrawArraysInstanced(GL_TRIANGLES, 0, 36, GLsizei(m.scene_count));
+  }
+
+  const Technique t = options.technique;
+  for (int pi = 0; pi < int(m.paintings.size()); ++pi) {
+    Painting& p = m.paintings[pi];
+    const RigidTransform canvas_from_world = p.world_from_canvas.Inverse();
+    const Mat4d clip_from_canvas = clip_from_world * Homogeneous(p.world_from_canvas);
+    const Vec3f eye = canvas_from_world.Apply(camera.eye_mm).cast<float>();
+    for (int k = 0; k < 4; ++k) glBindTextureUnit(k, p.textures[k]);
+    auto set_common = [&](GLuint prog) {
+      glUseProgram(prog);
+      set_mat(prog, "u_clip_from_canvas", clip_from_canvas);
+      glProgramUniform2f(prog, glGetUniformLocation(prog, "u_size_mm"), float(p.width_mm),
+                         float(p.height_mm));
+      glProgramUniform2i(prog, glGetUniformLocation(prog, "u_texels"), p.texels_w, p.texels_h);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_pitch_mm"), float(p.pitch_mm));
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_eye"), 1, eye.data());
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_ambient"), float(options.ambient));
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_delta0"), float(p.delta0_mm));
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_heatmap"),
+                         options.alpha_heatmap ? 1 : 0);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_shadows"), options.shadows ? 1 : 0);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_max_height"),
+                         float(p.max_height_mm) + 1e-3f);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_shadow_step_texels"),
+                         float(options.linear_step_texels));
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_shadow_max_steps"),
+                         options.max_linear_steps);
+      set_lights(prog, canvas_from_world);
+    };
+    stats.boxes_total += int(p.boxes.size());
+
+    if (t == Technique::kMesh) {
+      if (!p.mesh_built) m.BuildMesh(p);
+      set_common(m.mesh_program);
+      glBindVertexArray(p.mesh_vao);
+      glDrawElements(GL_TRIANGLES, GLsizei(p.mesh_triangles * 3), GL_UNSIGNED_INT, nullptr);
+      stats.mesh_triangles += p.mesh_triangles;
+      continue;
+    }
+    if (t != Technique::kReliefEverywhere) {
+      set_common(m.plane_program);
+      glProgramUniform1i(m.plane_program,
+                         glGetUniformLocation(m.plane_program, "u_parallax_iterations"),
+                         options.bump_parallax_iterations);
+      const Vec3f slab_min(0.0f, 0.0f, float(std::min(p.min_height_mm, p.delta0_mm)) - 1e-3f);
+      const Vec3f slab_max(float(p.width_mm), float(p.height_mm), float(p.delta0_mm));
+      glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_min"), 1,
+                          slab_min.data());
+      glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_max"), 1,
+                          slab_max.data());
+      glBindVertexArray(m.box_vao);  // the cube's corners; no instance attribute is read
+      glEnable(GL_CULL_FACE);
+      glCullFace(GL_BACK);
+      glDrawArrays(GL_TRIANGLES, 0, 36);
+      glDisable(GL_CULL_FACE);
+    }
+    // Relief boxes: (min, max, alpha) per drawn box.
+    std::vector<float> inst;
+    std::vector<float> outline;
+    if (t == Technique::kReliefEverywhere) {
+      // One box over the whole canvas, from its lowest to its highest point.
+      inst = {0.0f,
+              0.0f,
+              float(p.min_height_mm) - 1e-3f,
+              float(p.width_mm),
+              float(p.height_mm),
+              float(p.max_height_mm) + 1e-3f,
+              1.0f};
+      stats.boxes_drawn = 1;
+    } else {
+      const std::vector<float> alpha = BoxAlphas(pi, camera, options);
+      for (size_t i = 0; i < p.boxes.size(); ++i) {
+        if (alpha[i] <= 0.0f) continue;
+        const ReliefBox& b = p.boxes[i];
+        const float x0 = float(b.x0 * p.pitch_mm), x1 = float((b.x0 + b.width) * p.pitch_mm);
+        const float y1 = float(p.height_mm - b.y0 * p.pitch_mm);
+        const float y0 = float(p.height_mm - (b.y0 + b.height) * p.pitch_mm);
+        // A hair above H so the top texel is inside, not on the lid.
+        const float z0 = float(p.delta0_mm), z1 = float(p.max_height_mm) + 1e-3f;
+        inst.insert(inst.end(), {x0, y0, z0, x1, y1, z1, alpha[i]});
+        if (options.show_boxes) outline.insert(outline.end(), {x0, y0, z0, x1, y1, z1, 1, 1, 0});
+        ++stats.boxes_drawn;
+        if (alpha[i] < 1.0f) ++stats.boxes_blended;
+      }
+    }
+    if (!inst.empty()) {
+      set_common(m.box_program);
+      glProgramUniform1f(m.box_program, glGetUniformLocation(m.box_program, "u_step_texels"),
+                         float(options.linear_step_texels));
+      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_min_steps"),
+                         options.min_linear_steps);
+      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_max_steps"),
+                         options.max_linear_steps);
+      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_binary_steps"),
+                         options.binary_steps);
+      glNamedBufferData(m.box_instances, inst.size() * sizeof(float), inst.data(), GL_STREAM_DRAW);
+      glBindVertexArray(m.box_vao);
+      glEnable(GL_CULL_FACE);
+      glCullFace(GL_FRONT);  // back faces give the exit point
+      glEnable(GL_BLEND);
+      glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+      glDrawArraysInstanced(GL_TRIANGLES, 0, 36, GLsizei(inst.size() / 7));
+      glDisable(GL_BLEND);
+      glDisable(GL_CULL_FACE);
+    }
+    if (!outline.empty()) {
+      const GLuint prog = m.scene_program;
+      glUseProgram(prog);
+      set_mat(prog, "u_clip_from_model", clip_from_canvas);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_flat"), 1);
+      glNamedBufferData(m.edge_instances, outline.size() * sizeof(float), outline.data(),
+                        GL_STREAM_DRAW);
+      glBindVertexArray(m.edge_vao);
+      glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(outline.size() / 9));
+    }
+  }
+  glBindVertexArray(0);
+  stats.cpu_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return stats;
+}
+
+RenderedImage Renderer::Render(const ViewCamera& camera, const std::vector<Light>& lights,
+                               const RenderOptions& options) {
+  const Status valid_camera = camera.Validate();
+  DIGITIZE_CHECK(valid_camera.ok(), "Renderer::Render: " + valid_camera.message());
+  const Status valid = options.Validate();
+  DIGITIZE_CHECK(valid.ok(), "Renderer::Render: " + valid.message());
+  Impl& m = *impl_;
+  m.EnsureTarget(camera.width, camera.height);
+  glBindFramebuffer(GL_FRAMEBUFFER, m.fbo);
+  const auto start = std::chrono::steady_clock::now();
+  RenderedImage out;
+  out.stats = Draw(camera, lights, options);
+  glFinish();
+  out.ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  std::vector<float> rgba(size_t(camera.width) * camera.height * 4);
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, camera.width, camera.height, GL_RGBA, GL_FLOAT, rgba.data());
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  out.rgb = Grid<Vec3f>(camera.width, camera.height);
+  for (int y = 0; y < camera.height; ++y) {
+    const float* row =
+        rgba.data() + size_t(camera.height - 1 - y) * camera.width * 4;  // GL: bottom first
+    for (int x = 0; x < camera.width; ++x) {
+      Vec3f c(row[4 * x], row[4 * x + 1], row[4 * x + 2]);
+      DIGITIZE_CHECK(c.allFinite(), "Renderer::Render: non-finite radiance about to leave");
+      out.rgb(x, y) = c;
+    }
+  }
+  return out;
+}
+
+Grid<std::array<uint8_t, 3>> ToneMap(const Grid<Vec3f>& rgb, double exposure) {
+  Grid<std::array<uint8_t, 3>> out(rgb.width, rgb.height);
+  for (size_t i = 0; i < rgb.data.size(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      double v = std::clamp(double(rgb.data[i][c]) * exposure, 0.0, 1.0);
+      if (!std::isfinite(v)) v = 0;
+      v = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
+      out.data[i][c] = uint8_t(std::lround(v * 255));
+    }
+  }
+  return out;
+}
+
+}  // namespace digitize::viewer
