@@ -1,5 +1,5 @@
 # gnuplot script: docs/bench_viewer.png from docs/bench_viewer_table1.csv and
-# docs/bench_viewer_table2.csv (written by viewer_bench). Table 1 rows come 8 per view (the
+# docs/bench_viewer_table2.csv (written by viewer_bench). Table 1 rows come 10 per view (the
 # technique order of viewer_bench), views in the order close/framed/far x face/grazing.
 set datafile separator ","
 set datafile columnheaders
@@ -15,14 +15,14 @@ set key bottom left font ",9"
 set title "Table 1: frame time by technique x view (llvmpipe, 2 cores)"
 set ylabel "ms per frame (Draw + glFinish, min of 7)"
 set logscale y
-plot for [v=0:5] t1 every ::(8*v)::(8*v+7) using 0:3:xtic(2) with linespoints pt 7 \
+plot for [v=0:5] t1 every ::(10*v)::(10*v+9) using 0:3:xtic(2) with linespoints pt 7 \
      title word(views, v + 1)
 unset logscale y
 
 set title "Table 1: image error vs the Embree reference (4x4 box-filtered)"
 set ylabel "PSNR (dB), peak = paper white"
 set yrange [15:*]
-plot for [v=0:5] t1 every ::(8*v)::(8*v+7) using 0:8:xtic(2) with linespoints pt 7 \
+plot for [v=0:5] t1 every ::(10*v)::(10*v+9) using 0:8:xtic(2) with linespoints pt 7 \
      title word(views, v + 1), \
      35 with lines dt 2 lc rgb "black" title "35 dB"
 set autoscale y

@@ -2,7 +2,10 @@
 // rasteriser, 2 cores) with the image error of every rendering against the Embree reference.
 //   Table 1: frame time by technique x view (close / framed / far x face / grazing, view.h):
 //            mesh (full resolution and OpenMesh-simplified), relief everywhere, bump (paper's
-//            plain bump and with parallax correction), hybrid, hybrid+adaptive, screen-space error.
+//            plain bump, "px4" = 4 fixed-point parallax steps only, and the default with the slab
+//            search), hybrid, hybrid+adaptive (also "adaptive-px4": without the slab search, the
+//            renderer before it), screen-space error. delta0 = 30 % of H (the paper's range and
+//            ReliefOptions' default); --delta0=0.10 for the smaller slab.
 //   Table 2: hybrid+adaptive frame time by box size n (5, 10, 20, 50, 100) x angle (framed).
 // Timing: Draw + glFinish measured with a steady clock (GL timer queries are meaningless on
 // llvmpipe), over --frames frames after one warm-up: the minimum (the frame least disturbed by
@@ -10,7 +13,7 @@
 // from this one run.
 // Writes docs/bench_viewer_table1.csv and docs/bench_viewer_table2.csv for bench/plot_viewer.gp.
 //
-//   viewer_bench [--long-side=768] [--width=512] [--height=384] [--frames=7] [--delta0=0.10]
+//   viewer_bench [--long-side=768] [--width=512] [--height=384] [--frames=7] [--delta0=0.30]
 //                [--mesh-triangles=100000] [--csv-dir=docs] [--shots=DIR] [--tables=1,2]
 // --shots writes every Table 1 image, its reference and a x4 difference image as PNGs.
 #include <algorithm>
@@ -70,7 +73,7 @@ int main(int argc, char** argv) {
   const int width = std::stoi(Arg(argc, argv, "width", "512"));
   const int height = std::stoi(Arg(argc, argv, "height", "384"));
   const int frames = std::stoi(Arg(argc, argv, "frames", "7"));
-  const double delta0 = std::stod(Arg(argc, argv, "delta0", "0.10"));
+  const double delta0 = std::stod(Arg(argc, argv, "delta0", "0.30"));
   const size_t mesh_budget = std::stoul(Arg(argc, argv, "mesh-triangles", "100000"));
   const std::filesystem::path csv_dir = Arg(argc, argv, "csv-dir", "docs");
   const std::string shots = Arg(argc, argv, "shots", "");
@@ -126,18 +129,22 @@ int main(int argc, char** argv) {
     RenderOptions options;
   };
   std::vector<Mode> modes;
-  auto add = [&](const std::string& name, Renderer* r, Technique t, int parallax = 4) {
+  // parallax < 0: the default slab search; >= 0: that many fixed-point parallax steps instead.
+  auto add = [&](const std::string& name, Renderer* r, Technique t, int parallax = -1) {
     RenderOptions o;
     o.technique = t;
-    o.bump_parallax_iterations = parallax;
+    o.bump_slab_search = parallax < 0;
+    if (parallax >= 0) o.bump_parallax_iterations = parallax;
     modes.push_back({name, r, o});
   };
   add("mesh", full->get(), Technique::kMesh);
   add("mesh-" + std::to_string(mesh_budget / 1000) + "k", simple->get(), Technique::kMesh);
   add("relief", full->get(), Technique::kReliefEverywhere);
   add("bump-paper", full->get(), Technique::kBump, 0);
+  add("bump-px4", full->get(), Technique::kBump, 4);
   add("bump", full->get(), Technique::kBump);
   add("hybrid", full->get(), Technique::kHybrid);
+  add("adaptive-px4", full->get(), Technique::kHybridAdaptive, 4);
   add("adaptive", full->get(), Technique::kHybridAdaptive);
   add("screen-error", full->get(), Technique::kScreenSpaceError);
 

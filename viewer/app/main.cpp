@@ -177,6 +177,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     options.eps_min = emin;
     options.eps_max = std::max(emax, emin + 1e-4f);
     options.max_error_px = px;
+    ImGui::Checkbox("bump slab search", &options.bump_slab_search);
     ImGui::SliderInt("bump parallax steps", &options.bump_parallax_iterations, 0, 8);
     ImGui::Checkbox("relief self-shadowing", &options.shadows);
     ImGui::Checkbox("box overlay", &options.show_boxes);

@@ -198,6 +198,14 @@ Status RenderOptions::Validate() const {
   if (bump_parallax_iterations < 0 || bump_parallax_iterations > 32)
     return Error{"bump_parallax_iterations must be in [0, 32], got " +
                  std::to_string(bump_parallax_iterations)};
+  if (bump_min_steps < 1 || bump_min_steps > max_linear_steps)
+    return Error{"need 1 <= bump_min_steps <= max_linear_steps, got " +
+                 std::to_string(bump_min_steps)};
+  if (!finite(bump_search_min_texels) || bump_search_min_texels < 0)
+    return Error{"bump_search_min_texels must be >= 0, got " +
+                 FormatNumber(bump_search_min_texels)};
+  if (bump_binary_steps < 0 || bump_binary_steps > 32)
+    return Error{"bump_binary_steps must be in [0, 32], got " + std::to_string(bump_binary_steps)};
   if (!finite(ambient) || ambient < 0)
     return Error{"ambient must be >= 0, got " + FormatNumber(ambient)};
   return Status::Ok();
@@ -563,6 +571,17 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glProgramUniform1i(m.plane_program,
                          glGetUniformLocation(m.plane_program, "u_parallax_iterations"),
                          options.bump_parallax_iterations);
+      const GLuint pp = m.plane_program;
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_slab_search"),
+                         options.bump_slab_search ? 1 : 0);
+      glProgramUniform1f(pp, glGetUniformLocation(pp, "u_step_texels"),
+                         float(options.linear_step_texels));
+      glProgramUniform1f(pp, glGetUniformLocation(pp, "u_search_min_texels"),
+                         float(options.bump_search_min_texels));
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_min_steps"), options.bump_min_steps);
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_max_steps"), options.max_linear_steps);
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"),
+                         options.bump_binary_steps);
       const Vec3f slab_min(0.0f, 0.0f, float(std::min(p.min_height_mm, p.delta0_mm)) - 1e-3f);
       const Vec3f slab_max(float(p.width_mm), float(p.height_mm), float(p.delta0_mm));
       glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_min"), 1,

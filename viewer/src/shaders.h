@@ -106,13 +106,66 @@ void main() {
 inline constexpr const char* kPlaneFragment = R"(
 in vec3 v_pos;
 out vec4 o_color;
-uniform int u_parallax_iterations;
+uniform vec3 u_slab_min;
+uniform vec3 u_slab_max;
+uniform int u_slab_search;          // 1: linear + binary search through the slab
+uniform int u_parallax_iterations;  // fixed-point steps (0 = plain bump); with the search: where
+                                    // the relief rises above the plane
+uniform float u_step_texels;
+uniform float u_search_min_texels;
+uniform int u_min_steps;
+uniform int u_max_steps;
+uniform int u_binary_steps;
 void main() {
   vec3 d = normalize(v_pos - u_eye);
   vec3 p = v_pos;
-  // Parallax mapping (optional): slide along the view ray to where it meets the height there.
-  for (int i = 0; i < u_parallax_iterations && d.z < -1e-6; ++i)
-    p = v_pos + d * ((HeightAt(p.xy) - v_pos.z) / d.z);
+  if (u_slab_search != 0) {
+    // Parallax occlusion mapping limited to the slab [lowest texel, delta0]: the first
+    // intersection of the view ray with the height field between the slab's entry point (this
+    // fragment) and its exit point, searched like a relief box. The number of steps follows the
+    // ray's footprint across the slab (~ tan of the view angle): a few at face views, more at
+    // grazing ones.
+    vec3 safe = vec3(abs(d.x) > 1e-9 ? d.x : 1e-9, abs(d.y) > 1e-9 ? d.y : 1e-9,
+                     abs(d.z) > 1e-9 ? d.z : 1e-9);
+    vec3 t0 = (u_slab_min - u_eye) / safe, t1 = (u_slab_max - u_eye) / safe;
+    vec3 tmax = max(t0, t1);
+    float tfar = min(min(tmax.x, tmax.y), tmax.z);
+    float tnear = dot(v_pos - u_eye, d);
+    vec3 a = v_pos;
+    vec3 b = u_eye + d * max(tfar, tnear);
+    float footprint = length(b.xy - a.xy) / u_pitch_mm;
+    int n = clamp(int(ceil(footprint / u_step_texels)), u_min_steps, u_max_steps);
+    vec3 step = (b - a) / float(n);
+    bool hit = a.z <= HeightAt(a.xy);
+    int i = 0;
+    if (hit || footprint <= u_search_min_texels) {
+      // Relief above the plane here (a box's, not drawn), or a ray so steep that it crosses the
+      // slab within a texel or so (face views): the fixed-point steps, as without the search
+      // (they also move the point back towards the eye where the relief is above the plane).
+      hit = true;
+      for (int k = 0; k < u_parallax_iterations && d.z < -1e-6; ++k)
+        p = v_pos + d * ((HeightAt(p.xy) - v_pos.z) / d.z);
+    } else {
+      for (i = 1; i <= n; ++i) {
+        p = a + step * float(i);
+        if (p.z <= HeightAt(p.xy)) { hit = true; break; }
+      }
+    }
+    // Out through a side without meeting the surface: the ray sees no canvas (as the reference).
+    if (!hit) discard;
+    if (i > 0) {
+      vec3 lo = p - step, hi = p;
+      for (int j = 0; j < u_binary_steps; ++j) {
+        vec3 mid = 0.5 * (lo + hi);
+        if (mid.z <= HeightAt(mid.xy)) hi = mid; else lo = mid;
+      }
+      p = 0.5 * (lo + hi);
+    }
+  } else {
+    // Parallax mapping (optional): slide along the view ray to where it meets the height there.
+    for (int i = 0; i < u_parallax_iterations && d.z < -1e-6; ++i)
+      p = v_pos + d * ((HeightAt(p.xy) - v_pos.z) / d.z);
+  }
   // A ray that meets the surface beyond the canvas outline sees no canvas (as the reference).
   if (any(lessThan(p.xy, vec2(-1e-3))) || any(greaterThan(p.xy, u_size_mm + 1e-3))) discard;
   p.z = HeightAt(p.xy);  // view and light vectors corrected by the height (paper 5.4)

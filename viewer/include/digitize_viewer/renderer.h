@@ -20,11 +20,15 @@
 //   - output: linear radiance (RGBA32F target), no tone mapping.
 // Techniques differ only in P:
 //   kBump: P = (xy, h(xy)) where xy is where the view ray meets the plane z = delta0 (the view and
-//     light vectors are "corrected by the height", paper 5.4); with bump_parallax_iterations > 0,
-//     xy is moved along the ray towards the surface by that many fixed-point steps (parallax
-//     mapping; 0 = the paper's bump). The plane is the top of a slab whose sides reach down to
-//     the lowest texel, so the canvas outline stays where the true surface's is at grazing views;
-//     a ray whose corrected point falls outside the canvas draws nothing (as the reference);
+//     light vectors are "corrected by the height", paper 5.4), corrected along the ray: with
+//     bump_slab_search (default) by the first intersection of the ray with the height field
+//     inside the slab [lowest texel, delta0] (linear search + bisections, as a relief box) where
+//     the ray crosses more than bump_search_min_texels of the slab, else (face views, or relief
+//     above the plane at the entry point) by bump_parallax_iterations fixed-point steps
+//     (parallax mapping; 0 without the search = the paper's bump). The plane is the top of that
+//     slab, drawn with its sides, so the canvas outline stays where the true surface's is at
+//     grazing views; a ray whose corrected point falls outside the canvas draws nothing (as the
+//     reference);
 //   relief (inside a box): P = the first intersection of the view ray with the bilinearly
 //     interpolated height field between the box's entry and exit points (linear search with
 //     steps of linear_step_texels texels along the ray's footprint, at most max_linear_steps,
@@ -87,6 +91,19 @@ struct RenderOptions {
   // (delta0 above it): framed face view 27 -> 52 dB against the reference (point-sampled,
   // docs/benchmarks.md).
   int bump_parallax_iterations = 4;
+  // The bump plane's surface point by a search instead (default): the first intersection of the
+  // view ray with the height field inside the slab [lowest texel, delta0] below the plane (steep
+  // parallax / parallax occlusion mapping limited to that slab): steps of linear_step_texels
+  // along the ray's footprint across the slab (so ~ tan of the view angle: few at face views), at
+  // least bump_min_steps, at most max_linear_steps, then bump_binary_steps bisections. With the
+  // paper's delta0 = 30 % of H the relief under the plane is what fixed-point steps cannot follow
+  // at grazing views (docs/benchmarks.md). false: bump_parallax_iterations fixed-point steps.
+  bool bump_slab_search = true;
+  // Where the ray's footprint across the slab is at most this many texels (face views), the
+  // fixed-point steps are exact enough and cheaper: the search is skipped there.
+  double bump_search_min_texels = 1.0;
+  int bump_min_steps = 2;
+  int bump_binary_steps = 6;
   double ambient = 0;  // ambient radiance factor x rho_d (gallery look; 0 = none)
   // Relief self-shadowing: per shading point and light, a march through the height field towards
   // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
