@@ -138,7 +138,11 @@ void ExpectIdentical(const Pack& a, const Pack& b) {
   EXPECT_EQ(a.provenance.tool_version, b.provenance.tool_version);
   EXPECT_EQ(a.provenance.fit_brief, b.provenance.fit_brief);
   ASSERT_EQ(a.provenance.inputs.size(), b.provenance.inputs.size());
-  EXPECT_EQ(a.provenance.inputs[0].sha1, b.provenance.inputs[0].sha1);
+  for (size_t i = 0; i < a.provenance.inputs.size(); ++i) {
+    EXPECT_EQ(a.provenance.inputs[i].name, b.provenance.inputs[i].name);
+    EXPECT_EQ(a.provenance.inputs[i].sha1, b.provenance.inputs[i].sha1);
+    EXPECT_EQ(a.provenance.inputs[i].bytes, b.provenance.inputs[i].bytes);
+  }
 }
 
 TEST(Pack, TestPackIsValidAndHasBoxes) {
