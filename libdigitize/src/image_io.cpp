@@ -23,12 +23,6 @@ namespace fs = std::filesystem;
 static_assert(sizeof(Vec3f) == 3 * sizeof(float), "Grid<Vec3f> must be interleaved floats");
 static_assert(sizeof(std::array<uint8_t, 3>) == 3, "Grid<RGB8> must be interleaved bytes");
 
-// OIIO errors can span lines; messages here are one line each.
-std::string OneLine(std::string text) {
-  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
-  for (size_t pos; (pos = text.find('\n')) != std::string::npos;) text.replace(pos, 1, "; ");
-  return text;
-}
 
 // "name.exr" -> ".name.exr.tmp-<pid>-<n>.exr": hidden, unique per process and call, and still
 // ending in the real extension for any writer that picks the format from the name.
@@ -142,6 +136,12 @@ Status WriteAtomically(const fs::path& path,
   if (!status.ok()) fs::remove(temp, ec);  // best effort; the error already says what failed
   RemoveStaleTemporaries(path);
   return status;
+}
+
+std::string OneLine(std::string text) {
+  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
+  for (size_t pos; (pos = text.find('\n')) != std::string::npos;) text.replace(pos, 1, "; ");
+  return text;
 }
 
 Status WriteTextFile(const fs::path& path, const std::string& text) {

@@ -38,12 +38,6 @@ const std::vector<std::string> kReflectanceChannels = {"rho_d.R", "rho_d.G", "rh
 const std::vector<std::string> kBoxChannels = {"present", "h_max", "u_max", "v_max"};
 const char* const kPartNames[kParts] = {"surface", "reflectance", "boxes"};
 
-std::string OneLine(std::string text) {
-  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
-  for (size_t pos; (pos = text.find('\n')) != std::string::npos;) text.replace(pos, 1, "; ");
-  return text;
-}
-
 std::string TexelName(int x, int y) { return std::to_string(x) + ", " + std::to_string(y); }
 
 // --- half encoding --------------------------------------------------------------------------

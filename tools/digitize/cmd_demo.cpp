@@ -165,16 +165,15 @@ int RunDemo(const DemoArgs& args) {
     // the files: what a museum keeps is what is measured.
     PackWriteOptions quantised = args.quantised;
     quantised.encoding = PackEncoding::kQuantised;
+    auto canvas = ReadPreprocessOutputs(dir / "canvas");
+    if (!canvas.ok()) return Status(canvas.error());
+    auto maps = ReadReflectanceMaps(dir / "fit");
+    if (!maps.ok()) return Status(maps.error());
     for (const auto& [name, options] : {std::pair<std::string, PackWriteOptions>{"painting.pack.exr", {}},
                                         {"painting.q.pack.exr", quantised}}) {
-      auto canvas = ReadPreprocessOutputs(dir / "canvas");
-      if (!canvas.ok()) return Status(canvas.error());
-      auto maps = ReadReflectanceMaps(dir / "fit");
-      if (!maps.ok()) return Status(maps.error());
-      auto provenance = ProvenanceFromOutputs(dir / "canvas", dir / "fit",
-                                              std::string("{\"encoding\":\"") + ToString(options.encoding) + "\"}");
+      auto provenance = ProvenanceFromOutputs(dir / "canvas", dir / "fit", PackOptionsJson(options));
       if (!provenance.ok()) return Status(provenance.error());
-      auto pack = AssemblePack(std::move(canvas).value(), std::move(maps).value(), std::move(provenance).value());
+      auto pack = AssemblePack(*canvas, *maps, std::move(provenance).value());
       if (!pack.ok()) return Status(pack.error());
       if (Status s = WritePack(dir / name, *pack, options); !s.ok()) return s;
       auto read = ReadPack(dir / name);

@@ -27,14 +27,14 @@ Result<PreprocessedCanvas> LoadCanvas(const FitArgs& args, const PhotoSet& set) 
   return c;
 }
 
-Result<PhotoSet> ReadPhotos(const std::string& path, const PhotoSetOptions& o,
-                            const ProgressCallback& progress) {
+}  // namespace
+
+Result<PhotoSet> ReadPhotoSetFile(const std::string& path, const PhotoSetOptions& o,
+                                  const ProgressCallback& progress) {
   const std::filesystem::path p(path);
   if (p.extension() == ".lp" || p.extension() == ".LP") return ReadRtiCapture(p, o, progress);
   return ReadCalibration(p, o, progress);
 }
-
-}  // namespace
 
 int RunFit(FitArgs args) {
   const std::string cmd = "fit";
@@ -45,7 +45,7 @@ int RunFit(FitArgs args) {
   if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
 
   ProgressBar bar("fit");
-  Result<PhotoSet> set = ReadPhotos(args.photos, args.photo, bar.Callback());
+  Result<PhotoSet> set = ReadPhotoSetFile(args.photos, args.photo, bar.Callback());
   if (!set.ok()) return Fail(cmd, set.error().message);
   // RTI captures have uncalibrated light intensities (a hand-held light's distance varies), so a
   // dim light looks like a shadow to the unmodelled-shadow test: off unless asked for.
@@ -63,7 +63,7 @@ int RunFit(FitArgs args) {
   }
   std::optional<HeldOutScore> score;
   if (!args.held_out.empty()) {
-    Result<PhotoSet> held = ReadPhotos(args.held_out, args.photo, bar.Callback());
+    Result<PhotoSet> held = ReadPhotoSetFile(args.held_out, args.photo, bar.Callback());
     if (!held.ok()) return Fail(cmd, held.error().message);
     auto s = EvaluateHeldOut(canvas->field, canvas->normals, result->maps,
                              canvas->canvas_from_scan, *held);

@@ -8,7 +8,6 @@
 #include "digitize/reflectance_fit.h"
 
 namespace digitize::cli {
-namespace {
 
 std::string PackOptionsJson(const PackWriteOptions& o) {
   nlohmann::json j = {{"encoding", ToString(o.encoding)}};
@@ -20,14 +19,12 @@ std::string PackOptionsJson(const PackWriteOptions& o) {
   return j.dump();
 }
 
-void PrintSummaryLine(const std::string& path, const PackSummary& s) {
+void PrintPackSummaryLine(const std::string& path, const PackSummary& s) {
   std::printf("%s: %dx%d texels (%.1f x %.1f mm), %zu boxes, %s, %.2f bytes/texel (%llu bytes)\n",
               path.c_str(), s.width, s.height, s.width * s.pitch_mm, s.height * s.pitch_mm,
               s.box_count, ToString(s.encoding), s.BytesPerTexel(),
               static_cast<unsigned long long>(s.file_bytes));
 }
-
-}  // namespace
 
 void AddPackWriteFlags(CLI::App* c, PackWriteOptions& o, bool& quantised) {
   c->add_flag("--quantised", quantised,
@@ -65,7 +62,7 @@ int PackFromFolders(const std::string& cmd, const std::string& canvas_dir, const
   if (Status s = WritePack(out, *pack, options); !s.ok()) return Fail(cmd, s.message());
   auto summary = InspectPack(out);
   if (!summary.ok()) return Fail(cmd, summary.error().message);
-  PrintSummaryLine(out, *summary);
+  PrintPackSummaryLine(out, *summary);
   return 0;
 }
 
@@ -147,7 +144,7 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
                               {"lobe", s->quantisation.lobe_bits}};
       std::printf("%s\n", j.dump(2).c_str());
     } else {
-      PrintSummaryLine(args->pack, *s);
+      PrintPackSummaryLine(args->pack, *s);
       std::printf("  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",
                   s->version, ToString(s->encoding), s->raw_bytes_per_texel);
       if (s->encoding == PackEncoding::kQuantised)

@@ -9,25 +9,30 @@
 
 namespace digitize::cli {
 
-int RunPreprocess(const PreprocessArgs& args) {
-  const std::string cmd = "preprocess";
+Result<std::vector<Scan>> ReadScans(const PreprocessArgs& args) {
   ScanReadOptions read = args.read;
   read.mask = args.mask;
   if (args.grid.size() == 2) {
     read.grid_width = args.grid[0];
     read.grid_height = args.grid[1];
   }
-  if (Status s = read.Validate(); !s.ok()) return Fail(cmd, s.message());
-  if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
-
+  if (Status s = read.Validate(); !s.ok()) return Error{s.message()};
   std::vector<Scan> exposures;
   for (const std::string& path : args.scans) {
     Result<Scan> scan = ReadScan(path, read);
-    if (!scan.ok()) return Fail(cmd, scan.error().message);
+    if (!scan.ok()) return scan.error();
     exposures.push_back(std::move(scan).value());
   }
+  return exposures;
+}
+
+int RunPreprocess(const PreprocessArgs& args) {
+  const std::string cmd = "preprocess";
+  if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+  Result<std::vector<Scan>> exposures = ReadScans(args);
+  if (!exposures.ok()) return Fail(cmd, exposures.error().message);
   ProgressBar bar("preprocess");
-  Result<PreprocessResult> result = Preprocess(std::move(exposures), args.options, bar.Callback());
+  Result<PreprocessResult> result = Preprocess(std::move(exposures).value(), args.options, bar.Callback());
   bar.Finish();
   if (!result.ok()) return Fail(cmd, result.error().message);
 

@@ -20,13 +20,6 @@ struct RunArgs {
   bool quantised = false;
 };
 
-Result<PhotoSet> ReadAnyPhotoSet(const std::string& path, const PhotoSetOptions& o,
-                                 const ProgressCallback& progress) {
-  const std::filesystem::path p(path);
-  if (p.extension() == ".lp" || p.extension() == ".LP") return ReadRtiCapture(p, o, progress);
-  return ReadCalibration(p, o, progress);
-}
-
 std::string OptionsOf(const std::string& report_json) {
   const auto doc = nlohmann::json::parse(report_json, nullptr, false);
   return doc.is_object() && doc.contains("options") ? doc["options"].dump() : "{}";
@@ -46,7 +39,7 @@ int Run(RunArgs args) {
 
   // 1. Photos first: a bad calibration fails before minutes of preprocessing.
   ProgressBar bar("run");
-  Result<PhotoSet> set = ReadAnyPhotoSet(fa.photos, fa.photo, bar.Callback());
+  Result<PhotoSet> set = ReadPhotoSetFile(fa.photos, fa.photo, bar.Callback());
   if (!set.ok()) return Fail(cmd, set.error().message);
   if (set->is_rti && (fa.dark_ratio_option == nullptr || fa.dark_ratio_option->count() == 0)) {
     fa.options.dark_outlier_ratio = 0;  // uncalibrated RTI lights: see `digitize fit`
@@ -58,20 +51,10 @@ int Run(RunArgs args) {
   std::optional<PreprocessResult> preprocessed;
   std::string preprocess_options = "{}";
   if (!args.preprocess.scans.empty()) {
-    ScanReadOptions read = args.preprocess.read;
-    read.mask = args.preprocess.mask;
-    if (args.preprocess.grid.size() == 2) {
-      read.grid_width = args.preprocess.grid[0];
-      read.grid_height = args.preprocess.grid[1];
-    }
-    if (Status s = read.Validate(); !s.ok()) return Fail(cmd, s.message());
-    std::vector<Scan> exposures;
-    for (const std::string& path : args.preprocess.scans) {
-      Result<Scan> scan = ReadScan(path, read);
-      if (!scan.ok()) return Fail(cmd, scan.error().message);
-      exposures.push_back(std::move(scan).value());
-    }
-    Result<PreprocessResult> r = Preprocess(std::move(exposures), args.preprocess.options, bar.Callback());
+    Result<std::vector<Scan>> exposures = ReadScans(args.preprocess);
+    if (!exposures.ok()) return Fail(cmd, exposures.error().message);
+    Result<PreprocessResult> r =
+        Preprocess(std::move(exposures).value(), args.preprocess.options, bar.Callback());
     if (!r.ok()) return Fail(cmd, r.error().message);
     preprocessed = std::move(r).value();
     canvas.field = preprocessed->field;
@@ -114,7 +97,7 @@ int Run(RunArgs args) {
       {"preprocess", nlohmann::json::parse(preprocess_options, nullptr, false)},
       {"fit", nlohmann::json::parse(OptionsOf(ReflectanceReportJson(*fit, fa.options, photo_inputs)),
                                     nullptr, false)},
-      {"pack", {{"encoding", ToString(args.pack.encoding)}}}};
+      {"pack", nlohmann::json::parse(PackOptionsJson(args.pack))}};
   provenance.options_json = options.dump();
 
   if (!args.work.empty()) {
@@ -138,7 +121,7 @@ int Run(RunArgs args) {
   if (!fa.held_out.empty()) {
     auto read = ReadPack(args.out);
     if (!read.ok()) return Fail(cmd, read.error().message);
-    Result<PhotoSet> held = ReadAnyPhotoSet(fa.held_out, fa.photo, bar.Callback());
+    Result<PhotoSet> held = ReadPhotoSetFile(fa.held_out, fa.photo, bar.Callback());
     if (!held.ok()) return Fail(cmd, held.error().message);
     auto s = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan, *held);
     if (!s.ok()) return Fail(cmd, s.error().message);
@@ -155,9 +138,7 @@ int Run(RunArgs args) {
   auto summary = InspectPack(args.out);
   if (!summary.ok()) return Fail(cmd, summary.error().message);
   std::printf("pack: ");
-  std::printf("%s: %dx%d texels, %zu boxes, %s, %.2f bytes/texel\n", args.out.c_str(),
-              summary->width, summary->height, summary->box_count, ToString(summary->encoding),
-              summary->BytesPerTexel());
+  PrintPackSummaryLine(args.out, *summary);
   return 0;
 }
 

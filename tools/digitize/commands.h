@@ -44,6 +44,16 @@ struct FitArgs {
 };
 int RunFit(FitArgs args);
 
+// A calibration JSON or, by its .lp extension, an RTI capture (fit, run).
+Result<PhotoSet> ReadPhotoSetFile(const std::string& path, const PhotoSetOptions& options,
+                                  const ProgressCallback& progress);
+// The scans of `args`, read with its input flags (preprocess, run). Errors name the file or flag.
+Result<std::vector<Scan>> ReadScans(const PreprocessArgs& args);
+// The pack's write options as the provenance records them (pack, run, demo).
+std::string PackOptionsJson(const PackWriteOptions& options);
+// "PATH: WxH texels (w x h mm), N boxes, encoding, B bytes/texel (N bytes)"
+void PrintPackSummaryLine(const std::string& path, const PackSummary& summary);
+
 // Pack flags (--quantised, --*-bits) shared by pack, run and demo.
 void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quantised);
 // canvas folder + fit folder -> pack file; prints the pack's one-line summary.

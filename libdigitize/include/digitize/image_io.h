@@ -21,6 +21,10 @@ Status WriteAtomically(const std::filesystem::path& path,
 
 Status WriteTextFile(const std::filesystem::path& path, const std::string& text);
 
+// A library's multi-line error text as one line ("; " between lines, no trailing newline), so
+// every message the toolkit prints stays one line.
+std::string OneLine(std::string text);
+
 // String metadata stored in the image header (EXR attributes), e.g. {"digitize:units", "mm"}.
 using ImageMetadata = std::map<std::string, std::string>;
 
