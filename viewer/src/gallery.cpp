@@ -161,7 +161,7 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, options.render);
     std::filesystem::path out = out_png;
     if (cameras.size() > 1) {
-      char suffix[16];
+      char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
       std::snprintf(suffix, sizeof(suffix), "_%03zu", i);
       out =
           out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
