@@ -650,5 +650,131 @@ TEST_F(PhotoSetTest, DISABLED_Load64Photos2048) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Absurd inputs (issue 10): intrinsics, canvas footprint, duplicate images, extra .lp columns.
+
+TEST_F(CalibrationTest, AbsurdIntrinsicsAreRefusedNamingTheEntry) {
+  // fx = 1e-300 "fitted 76.9 % converged": a 180-degree view in which the canvas is one pixel.
+  doc_["cameras"][0]["fx"] = 1e-300;
+  ExpectError(Read(), {"calib.json", "cameras[0].fx", "field of view", "180 deg", "0.1 to 170"});
+  doc_["cameras"][0]["fx"] = 1e9;  // 1e-6 deg: fx in nm, or a stray exponent
+  ExpectError(Read(), {"calib.json", "cameras[0].fx", "horizontal field of view"});
+  doc_["cameras"][0]["fx"] = 20.0;
+  doc_["images"][1]["camera"]["fy"] = 0.5;  // 170.5 deg vertically over 12 px
+  ExpectError(Read(), {"calib.json", "images[1].camera.fy", "vertical field of view", "170.5"});
+  doc_["images"][1]["camera"]["fy"] = 31.0;
+  doc_["cameras"][0]["cx"] = 3 * kW + 0.5;  // two image widths beyond the right edge
+  ExpectError(Read(), {"calib.json", "cameras[0].cx", "outside", "-16 to 32"});
+  doc_["cameras"][0]["cx"] = -kW;  // exactly one image width to the left: a shifted lens, kept
+  ASSERT_TRUE(Read().ok());
+  doc_["cameras"][0]["cy"] = -2.0 * kH;
+  ExpectError(Read(), {"calib.json", "cameras[0].cy"});
+  doc_["cameras"][0]["cx"] = kW / 2.0;
+  doc_["cameras"][0]["cy"] = kH / 2.0;
+  // Just inside the bounds: accepted.
+  doc_["cameras"][0]["fx"] = kW / (2 * std::tan(0.5 * kMaxFieldOfViewDeg * M_PI / 180)) * 1.001;
+  EXPECT_TRUE(Read().ok());
+}
+
+TEST(CameraTest, CanvasFootprintMustBeUsable) {
+  // Canvas 200 x 100 mm, pitch 0.5 mm; a 640x480 camera 500 mm above: 2 px per mm.
+  const Eigen::Vector2d extent(200, 100);
+  Camera cam;
+  cam.width = 640;
+  cam.height = 480;
+  cam.fx = cam.fy = 1000;
+  cam.cx = 319.5;
+  cam.cy = 239.5;
+  cam.camera_from_scan.rotation = Vec3d(1, -1, -1).asDiagonal();
+  cam.camera_from_scan.translation = Vec3d(-100, 50, 500);
+  EXPECT_TRUE(CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.5, "cam").ok());
+
+  // A kilometre away (distance in mm read as m): the canvas is 0.2 x 0.1 px.
+  Camera far = cam;
+  far.camera_from_scan.translation.z() = 1e6;
+  ASSERT_TRUE(CheckCameraSeesCanvas(far, RigidTransform{}, extent, "x").ok());
+  Status s = CheckCanvasFootprint(far, RigidTransform{}, extent, 0.5, "calib.json: images[2]");
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message().rfind("calib.json: images[2]: ", 0), 0u) << s.message();
+  EXPECT_NE(s.message().find("spans only 0.2 x 0.1 px"), std::string::npos) << s.message();
+
+  // A canvas of pitch 1 um in this photo: each pixel spans 500 texels.
+  s = CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.001, "cam");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("spans 500 texels"), std::string::npos) << s.message();
+  EXPECT_TRUE(CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.5 / kMaxTexelsPerPixel * 1.01,
+                                   "cam").ok());
+
+  // An orthographic camera of 0.1 um pixels: one 0.5 mm texel spans 5000 px.
+  Camera ortho = cam;
+  ortho.model = CameraModel::kOrthographic;
+  ortho.pixel_pitch_mm = 1e-4;
+  s = CheckCanvasFootprint(ortho, RigidTransform{}, extent, 0.5, "cam");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("spans 5000 pixels"), std::string::npos) << s.message();
+
+  // Seen edge-on at 89.9 deg: the canvas is a line in the photo.
+  Camera grazing = cam;
+  const double a = 89.9 * M_PI / 180;
+  grazing.camera_from_scan.rotation =
+      Vec3d(1, -1, -1).asDiagonal() * Eigen::AngleAxisd(a, Vec3d::UnitX()).toRotationMatrix();
+  const Vec3d centre(100, 50, 0);
+  const Vec3d eye = centre + 500 * Vec3d(0, std::sin(a), std::cos(a));
+  grazing.camera_from_scan.translation = -(grazing.camera_from_scan.rotation * eye);
+  ASSERT_NEAR(grazing.camera_from_scan.Apply(centre).x(), 0, 1e-9);
+  s = CheckCanvasFootprint(grazing, RigidTransform{}, extent, 0.5, "cam");
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("spans only 400 x "), std::string::npos) << s.message();
+
+  // Through the set check: the set's entry is named.
+  PhotoSet set;
+  set.photos.resize(2);
+  set.photos[0].camera = cam;
+  set.photos[0].entry = "calib.json: images[0]";
+  set.photos[1].camera = far;
+  set.photos[1].entry = "calib.json: images[1]";
+  HeightField canvas;
+  canvas.height_mm = Grid<float>(400, 200, 0.0f);
+  canvas.state = Grid<TexelState>(400, 200, TexelState::kMeasured);
+  canvas.pitch_mm = 0.5;
+  s = CheckCamerasSeeCanvas(set, RigidTransform{}, canvas);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.message().rfind("calib.json: images[1]: the canvas spans only", 0), 0u)
+      << s.message();
+}
+
+TEST_F(CalibrationTest, DuplicateImagesAreRefusedNamingBothEntries) {
+  doc_["images"][2]["path"] = "sub/../a.png";  // images[0] is "a.png"
+  ExpectError(Read(), {"calib.json: images[2]", "a.png", "same image as", "calib.json: images[0]"});
+  // Through the parser alone too (what the fuzz targets see).
+  ExpectError(ParseCalibrationText(doc_.dump(), Path("calib.json")),
+              {"images[2]", "same image", "images[0]"});
+  doc_["images"][2]["path"] = Path("a.png").string();  // absolute
+  ExpectError(Read(), {"images[2]", "images[0]"});
+  doc_["images"][2]["path"] = "c.exr";
+  EXPECT_TRUE(Read().ok());
+}
+
+TEST_F(LpTest, DuplicateImagesAndExtraColumnsAreRefusedNamingTheLine) {
+  ExpectError(ReadLp("3\ni1.png 0 0 1\ni2.png 0 1 1\n./i1.png 1 0 1\n"),
+              {"dirs.lp, line 4", "i1.png", "same image as", "dirs.lp, line 2"});
+  // A Windows path from the capture machine that falls back onto an image already listed.
+  ExpectError(ReadLp("2\ni1.png 0 0 1\nC:\\capture\\i1.png 0 1 1\n"),
+              {"line 3", "same image as", "line 2"});
+  // Extra columns were read as part of the name ("i2.png 0.1: no such file").
+  ExpectError(ReadLp("2\ni1.png 0 0 1\ni2.png 0.1 0.2 0.3 0.4\n"),
+              {"dirs.lp, line 3", "filename x y z", "3 numbers", "got 4 numbers after \"i2.png\""});
+  ExpectError(ReadLp("2\ni1.png 0 0 1 1 1 1\ni2.png 0 0 1\n"),
+              {"line 2", "got 6 numbers after \"i1.png\""});
+  ExpectError(ParseRtiLightsText("1\ni 3.png 1 2 3 4\n", "x.lp"),
+              {"x.lp, line 2", "got 4 numbers after \"i 3.png\""});
+  // Names with spaces still read; a name that is a number alone is still a name.
+  auto set = ReadLp("2\ni 3.png 0 0 1\ni2.png 0 1 1\n");
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  auto entries = ParseRtiLightsText("1\n12 0 0 1\n", "x.lp");
+  ASSERT_TRUE(entries.ok()) << entries.error().message;
+  EXPECT_EQ(entries->front().image, "12");
+}
+
 }  // namespace
 }  // namespace digitize

@@ -12,12 +12,14 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <mutex>
 #include <new>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <tuple>
 #include <vector>
 
 #include "digitize/image_io.h"
@@ -607,6 +609,19 @@ std::vector<RtiLightEntry> ParseLp(const fs::path& lp_path, std::string_view tex
     RtiLightEntry e;
     e.line = line_no;
     const size_t n = tokens.size();
+    // Extra columns (intensities, a second direction) would otherwise be read as part of the name
+    // ("img12.jpg 0.1: no such file"). The first token is always the name; an image name's last
+    // word ends with its extension, so it does not parse as a number.
+    size_t numbers = 0;
+    for (double v = 0; numbers + 1 < n && ParseDouble(tokens[n - 1 - numbers].text, &v);) ++numbers;
+    if (numbers > 3) {
+      const Token& name_end = tokens[n - 1 - numbers];
+      Fail(at(line_no) + "expected \"filename x y z\" (a file name and 3 numbers), got " +
+           std::to_string(numbers) + " numbers after \"" +
+           std::string(line.substr(tokens[0].begin,
+                                   name_end.begin + name_end.text.size() - tokens[0].begin)) +
+           "\"");
+    }
     // The file name is everything before the three numbers (it may contain spaces): from its
     // first token to the end of its last, so no separator (\r, \v, \f too) sticks to it.
     const Token& last = tokens[n - 4];
@@ -701,6 +716,20 @@ Status Camera::Validate(const std::string& what) const {
   if (model == CameraModel::kPinhole) {
     if (!(std::isfinite(fx) && fx > 0)) return bad("fx", "must be > 0 px, got " + Num(fx));
     if (!(std::isfinite(fy) && fy > 0)) return bad("fy", "must be > 0 px, got " + Num(fy));
+    // The field of view over the whole image, whatever the principal point: a focal length off
+    // by orders of magnitude (in mm instead of px, or a stray exponent) shows here first.
+    const auto fov_deg = [](int size, double f) {
+      return 2.0 * std::atan(size / (2.0 * f)) * 180.0 / M_PI;
+    };
+    for (const auto& [key, size, f, way] : {std::tuple{"fx", width, fx, "horizontal"},
+                                            std::tuple{"fy", height, fy, "vertical"}}) {
+      const double fov = fov_deg(size, f);
+      if (!(fov >= kMinFieldOfViewDeg && fov <= kMaxFieldOfViewDeg)) {
+        return bad(key, Num(f) + " px gives a " + way + " field of view of " + Num(fov) +
+                            " deg over " + std::to_string(size) + " px; a camera has " +
+                            Num(kMinFieldOfViewDeg) + " to " + Num(kMaxFieldOfViewDeg) + " deg");
+      }
+    }
   } else {
     if (!(std::isfinite(pixel_pitch_mm) && pixel_pitch_mm > 0)) {
       return bad("pixel_pitch_mm", "must be > 0 mm, got " + Num(pixel_pitch_mm));
@@ -708,6 +737,16 @@ Status Camera::Validate(const std::string& what) const {
   }
   if (!std::isfinite(cx)) return bad("cx", "is not finite");
   if (!std::isfinite(cy)) return bad("cy", "is not finite");
+  // Shifted lenses move the principal point, but not by more than the image's own size.
+  for (const auto& [key, c, size] : {std::tuple{"cx", cx, width}, std::tuple{"cy", cy, height}}) {
+    const double margin = kMaxPrincipalPointOffset * size;
+    if (!(c >= -margin && c <= size + margin)) {
+      return bad(key, Num(c) + " px is further outside the " + std::to_string(size) +
+                          "-px image than " + Num(kMaxPrincipalPointOffset) +
+                          " image size (allowed " + Num(-margin) + " to " + Num(size + margin) +
+                          ")");
+    }
+  }
   const Mat3d& R = camera_from_scan.rotation;
   if (!R.allFinite()) return bad("camera_from_scan.rotation", "is not finite");
   const double det = R.determinant();
@@ -869,9 +908,31 @@ Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options,
   return Status::Ok();
 }
 
+namespace {
+
+// One image listed twice would weigh as two measurements of one light and view. Paths are compared
+// once resolved and lexically normalised ("a/../x.png" is "x.png"); the same file under two names
+// (a copy, a link) is not looked for: that would mean reading every image's bytes for a mistake
+// that a path comparison already catches in the cases met (a line pasted twice, an edited index).
+Status CheckDistinctImages(const PhotoSet& set) {
+  std::map<fs::path, const Photo*> seen;
+  for (const Photo& photo : set.photos) {
+    const auto [it, added] = seen.emplace(photo.path.lexically_normal(), &photo);
+    if (!added) {
+      return Error{photo.entry + ": " + photo.path.string() + " is the same image as " +
+                   it->second->entry + " (each image may be listed once)"};
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Result<PhotoSet> ParseCalibrationText(std::string_view text, const fs::path& source) {
   try {
-    return ParseCalibration(source, text);
+    PhotoSet set = ParseCalibration(source, text);
+    if (Status s = CheckDistinctImages(set); !s) return Error{s.message()};
+    return set;
   } catch (const BadInput& bad) {
     return Error{bad.message};
   }
@@ -950,6 +1011,7 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
       Vec3d(-width * camera.pixel_pitch_mm / 2, height * camera.pixel_pitch_mm / 2,
             options.rti_camera_distance_mm);
   for (Photo& photo : set.photos) photo.camera = camera;
+  if (Status s = CheckDistinctImages(set); !s) return Error{s.message()};
   if (options.load_pixels) {
     if (Status s = LoadPhotoPixels(set, options, progress); !s) return Error{s.message()};
   }
@@ -986,11 +1048,60 @@ Status CheckCameraSeesCanvas(const Camera& camera, const RigidTransform& canvas_
                Size(camera.width, camera.height) + ")"};
 }
 
+Status CheckCanvasFootprint(const Camera& camera, const RigidTransform& canvas_from_scan,
+                            const Eigen::Vector2d& extent_mm, double pitch_mm,
+                            const std::string& what) {
+  const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
+  const Vec3d centre = scan_from_canvas.Apply(Vec3d(extent_mm.x() / 2, extent_mm.y() / 2, 0));
+  const Vec3d p = camera.camera_from_scan.Apply(centre);
+  // Derivative of the projection along a canvas axis at the centre, px per mm: analytic, so that
+  // absurd scales (1e-300) come out as what they are rather than as rounding noise.
+  const auto px_per_mm = [&](const Vec3d& axis_canvas) {
+    const Vec3d d = camera.camera_from_scan.rotation * (scan_from_canvas.rotation * axis_canvas);
+    Eigen::Vector2d j;
+    if (camera.model == CameraModel::kOrthographic) {
+      j = Eigen::Vector2d(d.x(), d.y()) / camera.pixel_pitch_mm;
+    } else {
+      j = Eigen::Vector2d(camera.fx * (d.x() * p.z() - p.x() * d.z()),
+                          camera.fy * (d.y() * p.z() - p.y() * d.z())) /
+          (p.z() * p.z());
+    }
+    return j.norm();
+  };
+  const double sx = px_per_mm(Vec3d::UnitX()), sy = px_per_mm(Vec3d::UnitY());
+  const double wide = sx * extent_mm.x(), tall = sy * extent_mm.y();
+  if (!(wide >= kMinCanvasFootprintPx && tall >= kMinCanvasFootprintPx)) {
+    return Error{what + ": the canvas spans only " + Num(wide) + " x " + Num(tall) +
+                 " px in this photo (at least " + Num(kMinCanvasFootprintPx) +
+                 " px along each axis): its focal length, pixel pitch or distance is off"};
+  }
+  for (const auto& [axis, s] : {std::pair{"X", sx}, std::pair{"Y", sy}}) {
+    const double px_per_texel = s * pitch_mm;
+    if (!(px_per_texel >= 1.0 / kMaxTexelsPerPixel)) {
+      return Error{what + ": one pixel of this photo spans " + Num(1.0 / px_per_texel) +
+                   " texels along the canvas's " + axis + " (at most " + Num(kMaxTexelsPerPixel) +
+                   "): too coarse for a canvas of pitch " + Num(pitch_mm) + " mm"};
+    }
+    if (!(px_per_texel <= kMaxPixelsPerTexel)) {
+      return Error{what + ": one texel of the canvas (pitch " + Num(pitch_mm) + " mm) spans " +
+                   Num(px_per_texel) + " pixels of this photo along the canvas's " + axis +
+                   " (at most " + Num(kMaxPixelsPerTexel) +
+                   "): its focal length, pixel pitch or distance is off"};
+    }
+  }
+  return Status::Ok();
+}
+
 Status CheckCamerasSeeCanvas(const PhotoSet& set, const RigidTransform& canvas_from_scan,
                              const HeightField& canvas) {
   const Eigen::Vector2d extent(canvas.width() * canvas.pitch_mm, canvas.height() * canvas.pitch_mm);
   for (const Photo& photo : set.photos) {
     if (Status s = CheckCameraSeesCanvas(photo.camera, canvas_from_scan, extent, photo.entry); !s) {
+      return s;
+    }
+    if (Status s = CheckCanvasFootprint(photo.camera, canvas_from_scan, extent, canvas.pitch_mm,
+                                        photo.entry);
+        !s) {
       return s;
     }
   }

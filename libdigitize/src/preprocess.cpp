@@ -306,7 +306,22 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
 
 namespace digitize {
 
+Status CheckCanvasFolder(const std::filesystem::path& dir) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    return Error{dir.string() + ": " +
+                 (std::filesystem::exists(dir, ec) ? "not a folder" : "no such folder") +
+                 " (a canvas folder written by `digitize preprocess` was expected)"};
+  for (const char* name : kCanvasFolderFiles) {
+    if (!std::filesystem::is_regular_file(dir / name, ec))
+      return Error{dir.string() + ": not a canvas folder (written by `digitize preprocess`): " +
+                   name + " is missing"};
+  }
+  return Status::Ok();
+}
+
 Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir) {
+  if (Status s = CheckCanvasFolder(dir); !s.ok()) return Error{s.message()};
   PreprocessedCanvas out;
   const auto height_path = dir / "height.exr";
   auto height = ReadImage(height_path);

@@ -82,7 +82,51 @@ size_t PrefilterDarkOutliers(BrdfSamples& samples, const ReflectanceFitOptions& 
   return total;
 }
 
+// Which photos can give samples at all, and how many distinct (light, view) pairs they hold (see
+// the header). Judged at the canvas centre: lights and cameras are far from the canvas compared
+// with its relief, and the count only has to tell one pair from several.
+void CountPhotoDirections(const PhotoSet& set, const HeightField& canvas,
+                          const RigidTransform& canvas_from_scan, ReflectanceFitReport& report) {
+  const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
+  const Vec3d centre = scan_from_canvas.Apply(
+      Vec3d(canvas.width() * canvas.pitch_mm / 2, canvas.height() * canvas.pitch_mm / 2, 0));
+  const double same = std::cos(kSameDirectionDeg * M_PI / 180.0);
+  std::vector<std::pair<Vec3d, Vec3d>> distinct;  // (light, view), canvas frame
+  report.photos = set.photos.size();
+  for (const Photo& photo : set.photos) {
+    const Light& light = photo.light;
+    const bool below = light.type == LightType::kPoint
+                           ? canvas_from_scan.Apply(light.position_mm).z() <= 0
+                           : canvas_from_scan.ApplyToDirection(light.direction).z() <= 0;
+    if (below) {
+      report.light_below_canvas.push_back(photo.entry);
+      continue;
+    }
+    const Vec3d l = canvas_from_scan.ApplyToDirection(light.DirectionTo(centre));
+    const Vec3d v = canvas_from_scan.ApplyToDirection(photo.camera.DirectionToCamera(centre));
+    const bool seen = std::any_of(distinct.begin(), distinct.end(), [&](const auto& d) {
+      return d.first.dot(l) >= same && d.second.dot(v) >= same;
+    });
+    if (!seen) distinct.emplace_back(l, v);
+  }
+  report.distinct_directions = static_cast<int>(distinct.size());
+}
+
 }  // namespace
+
+std::vector<std::string> ReflectanceFitReport::Warnings() const {
+  std::vector<std::string> out;
+  if (!light_below_canvas.empty()) {
+    std::string list;
+    for (size_t i = 0; i < light_below_canvas.size() && i < 3; ++i)
+      list += (i ? "; " : "") + light_below_canvas[i];
+    if (light_below_canvas.size() > 3) list += "; ...";
+    out.push_back(std::to_string(light_below_canvas.size()) + " of " + std::to_string(photos) +
+                  " photos have their light at or below the canvas plane, so they add no sample (" +
+                  list + ")");
+  }
+  return out;
+}
 
 Status ReflectanceFitOptions::Validate() const {
   if (Status s = samples.Validate(); !s.ok()) return Error{"samples: " + s.message()};
@@ -131,6 +175,20 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
 
   const SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
   if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
+  CountPhotoDirections(photos, canvas, canvas_from_scan, report);
+  const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
+  if (report.distinct_directions < needed) {
+    const int n = report.distinct_directions;
+    const size_t below = report.light_below_canvas.size();
+    return Error{photos.source.string() + ": only " + std::to_string(n) + " distinct (light, view) " +
+                 (n == 1 ? "pair" : "pairs") + " with the light above the canvas, in " +
+                 std::to_string(report.photos) + (report.photos == 1 ? " photo" : " photos") +
+                 (below ? " (" + std::to_string(below) + " lit from at or below the canvas)" : "") +
+                 "; the fit needs at least " + std::to_string(needed) + " (min_samples " +
+                 std::to_string(options.fit.min_samples) +
+                 "): with fewer, every texel would be \"too few samples\", none told diffuse "
+                 "from glossy"};
+  }
 
   std::vector<uint32_t> texels;
   texels.reserve(canvas.height_mm.size());
@@ -248,6 +306,12 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
         {"frame", "texel tangent frame: z = normal, x = canvas X made perpendicular to it"},
         {"units", "rho_d, rho_s in 1/sr; radiance = f_r * (n.l) * E"}}},
       {"brief", r.Brief()},
+      {"warnings", r.Warnings()},
+      {"photos",
+       {{"count", r.photos},
+        {"distinct_directions", r.distinct_directions},
+        {"light_below_canvas", r.light_below_canvas.size()},
+        {"light_below_canvas_entries", r.light_below_canvas}}},
       {"size_texels", {result.maps.width(), result.maps.height()}},
       {"texels_fitted", r.fit.texels},
       {"texels_outside", r.texels_outside},

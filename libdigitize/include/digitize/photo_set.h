@@ -49,6 +49,19 @@ namespace digitize {
 //   orthographic:  u = x / pixel_pitch_mm + cx,    v = y / pixel_pitch_mm + cy  (rays along +z)
 enum class CameraModel { kPinhole, kOrthographic };
 
+// Bounds beyond which a camera is a typo or a unit mix-up (fx in mm, a pitch in metres), not a
+// camera: `fx: 1e-300` (a 180-degree view) fitted "76.9 % converged" with every texel sampling
+// one pixel. Camera::Validate checks the first two, CheckCanvasFootprint the others
+// (docs/formats.md, "Bounds on cameras").
+inline constexpr double kMinFieldOfViewDeg = 0.1;  // pinhole, horizontal and vertical: a 600 mm
+                                                   // lens on a full-frame sensor sees 3.4 deg
+inline constexpr double kMaxFieldOfViewDeg = 170.0;  // fisheyes need undistorting first anyway
+inline constexpr double kMaxPrincipalPointOffset = 1.0;  // image widths / heights the principal
+                                                         // point may lie beyond the image's edge
+inline constexpr double kMinCanvasFootprintPx = 4.0;  // the canvas in a photo, px along each axis
+inline constexpr double kMaxTexelsPerPixel = 64.0;    // canvas texels one photo pixel may span
+inline constexpr double kMaxPixelsPerTexel = 1024.0;  // photo pixels one canvas texel may span
+
 struct Camera {
   CameraModel model = CameraModel::kPinhole;
   int width = 0, height = 0;        // image size, px
@@ -88,7 +101,9 @@ struct Camera {
     return (CentreInScan() - p_scan).normalized();
   }
 
-  // Checks the intrinsics and the rotation; messages start with `what` ("calib.json: cameras[0]").
+  // Checks the intrinsics (sizes; pinhole field of view within [kMinFieldOfViewDeg,
+  // kMaxFieldOfViewDeg] both ways; principal point within kMaxPrincipalPointOffset image sizes of
+  // the image) and the rotation; messages start with `what` ("calib.json: cameras[0]").
   Status Validate(const std::string& what) const;
 };
 
@@ -211,7 +226,8 @@ struct PhotoSetOptions {
 // ("calib.json: images[3].camera.camera_from_scan.rotation is not a rotation (det 0.71, ...)"),
 // and for image problems also the image file (missing, unreadable, size differs from the
 // camera's). Rotations within 1e-4 of orthonormal are snapped to the nearest rotation (JSON
-// written with 6 decimals); beyond that, or with det < 0, they are refused.
+// written with 6 decimals); beyond that, or with det < 0, they are refused. Two entries naming
+// the same image (same path once resolved and lexically normalised) are refused, naming both.
 // Does NOT check that the cameras see the canvas: that needs the canvas (CheckCamerasSeeCanvas).
 Result<PhotoSet> ReadCalibration(const std::filesystem::path& json_path,
                                  const PhotoSetOptions& options = {},
@@ -222,8 +238,10 @@ Result<PhotoSet> ReadCalibration(const std::filesystem::path& json_path,
 // images. Tolerated: blank lines, CRLF, '#' comments, tabs, file names with spaces, Windows
 // paths (backslashes; an absolute path that does not exist is looked up by its file name in the
 // .lp's folder). Errors name the .lp file and line: bad count, count mismatch, non-numeric or
-// non-finite value, zero direction; missing / unreadable images and images whose size differs from
-// the first one name the image file too.
+// non-finite value, zero direction, more than 3 numbers after the name (extra columns; so a name
+// whose last word is a number, "scan 2" without an extension, cannot be read); missing /
+// unreadable images, images whose size differs from the first one, and an image listed twice
+// (same resolved path; both lines named) name the image file too.
 //
 // Direction frame (checked on the real capture in shared/data/rti_icon: lights with x > 0
 // brighten the right of the images, lights with y > 0 the top): x towards the image's right
@@ -283,7 +301,15 @@ float SrgbToLinear(float encoded);
 // The error starts with `what` ("calib.json: images[3]") and says which of these fails.
 Status CheckCameraSeesCanvas(const Camera& camera, const RigidTransform& canvas_from_scan,
                              const Eigen::Vector2d& extent_mm, const std::string& what);
-// Every photo of the set against a canvas height field (extent = size x pitch).
+// Whether the canvas appears in the photo at a scale the fit can use, measured by the local scale
+// of the projection at the canvas centre along the canvas's X and Y (px per mm): the canvas must
+// span at least kMinCanvasFootprintPx pixels along each axis, one pixel at most
+// kMaxTexelsPerPixel texels of `pitch_mm` and one texel at most kMaxPixelsPerTexel pixels.
+// Precondition: CheckCameraSeesCanvas passed. The error starts with `what` and gives the numbers.
+Status CheckCanvasFootprint(const Camera& camera, const RigidTransform& canvas_from_scan,
+                            const Eigen::Vector2d& extent_mm, double pitch_mm,
+                            const std::string& what);
+// Every photo of the set against a canvas height field (extent = size x pitch): both checks above.
 Status CheckCamerasSeeCanvas(const PhotoSet& set, const RigidTransform& canvas_from_scan,
                              const HeightField& canvas);
 

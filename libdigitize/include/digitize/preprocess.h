@@ -2,6 +2,7 @@
 // and a report. Strings the stages together (SPEC steps 1-4) and times each step.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -72,9 +73,21 @@ struct PreprocessedCanvas {
   int cell_px = 16;
   std::vector<ReliefBox> boxes;
 };
-// Errors name the file: missing, unreadable, sizes that differ, a mask value that is no texel
-// state, NaN/Inf heights or normals, a transform whose rotation is not a rotation, boxes outside
-// the grid.
+// A canvas folder: what every reader of one (`fit --canvas`, `pack --canvas`, the demo) requires,
+// and so the one definition of it (docs/formats.md). WritePreprocessOutputs writes these and
+// canvas_mask_scan.png, which no later stage needs. report.json is required although only the
+// pack reads it (for its provenance: the preprocess options), so that a folder `fit` accepts is
+// one `pack` accepts too.
+inline constexpr std::array<const char*, 6> kCanvasFolderFiles = {
+    "height.exr", "mask.png", "normals.exr", "transform.json", "boxes.json", "report.json"};
+// Errors name the folder and the first missing file: "c/: not a canvas folder (written by
+// `digitize preprocess`): boxes.json is missing". Checks presence only; ReadPreprocessOutputs
+// checks the content.
+Status CheckCanvasFolder(const std::filesystem::path& dir);
+
+// Reads a canvas folder (CheckCanvasFolder first). Errors name the file: missing, unreadable,
+// sizes that differ, a mask value that is no texel state, NaN/Inf heights or normals, a transform
+// whose rotation is not a rotation, boxes outside the grid.
 Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir);
 
 }  // namespace digitize

@@ -51,7 +51,24 @@ struct ReflectanceFitOptions {
   Status Validate() const;
 };
 
+// A photo set constrains the fit only through its distinct (light, view) pairs: the fit classifies
+// a texel (diffuse-only or glossy) only from min_samples usable samples, so a set with fewer
+// distinct pairs than max(min_samples, kMinDistinctPhotoDirections) would make every texel "too
+// few samples" (a one-photo capture gave a black pack and exit 0): FitReflectance refuses it. Two
+// photos are one pair when both their light and their view directions, at the canvas centre and
+// in the canvas frame, are within kSameDirectionDeg; photos whose light is at or below the canvas
+// plane (canvas Z <= 0: a point light's position, a directional light's direction) give no sample
+// and do not count.
+inline constexpr int kMinDistinctPhotoDirections = 2;  // a diffuse fit's chi-square test needs
+                                                      // 3 N - 3 > 0 degrees of freedom
+inline constexpr double kSameDirectionDeg = 0.5;
+
 struct ReflectanceFitReport {
+  size_t photos = 0;                  // in the set
+  int distinct_directions = 0;        // distinct (light, view) pairs with the light above the canvas
+  // Photos whose light is at or below the canvas plane: a warning, not an error (their samples
+  // are rejected, n.l <= 0); their entries, in set order.
+  std::vector<std::string> light_below_canvas;
   SampleStats samples;
   BrdfFitSummary fit;           // over the fitted texels; fit.seconds = wall time fitting
   size_t dark_outliers = 0;     // samples removed as unmodelled shadows
@@ -64,6 +81,10 @@ struct ReflectanceFitReport {
   // One line: "1.05 M texels x 64 photos: 97.8 % converged, 1.9 % diffuse-only, ...; samples
   // 2.1 s, fit 4.9 s, total 7.4 s".
   std::string Brief() const;
+  // What the user should know although the fit ran ("3 of 40 photos have their light at or below
+  // the canvas plane ..."); empty when nothing is amiss. Printed by `fit` and `run`, and in
+  // report.json ("warnings").
+  std::vector<std::string> Warnings() const;
 };
 
 struct ReflectanceFitResult {
@@ -72,8 +93,10 @@ struct ReflectanceFitResult {
 };
 
 // Errors (nothing fitted): invalid options; sizes that differ; photos not loaded; a camera that
-// does not see the canvas (names the calibration entry); a tracer build failure. Never NaN/Inf in
-// the maps (checked).
+// does not see the canvas or sees it at an absurd scale (CheckCamerasSeeCanvas; names the
+// calibration entry); fewer distinct (light, view) pairs than the fit needs (above; names the
+// photo set, the count and the minimum); a tracer build failure. Never NaN/Inf in the maps
+// (checked).
 Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
                                             const RigidTransform& canvas_from_scan,
                                             const PhotoSet& photos,
