@@ -12,6 +12,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace {
 
@@ -68,7 +69,7 @@ TEST_F(CliTest, HelpForEveryCommand) {
   EXPECT_NE(pre.text.find("--cell-px"), std::string::npos);
 }
 
-TEST_F(CliTest, NoCommandIsAUsageError) { EXPECT_NE(RunCli("").exit_code, 0); }
+TEST_F(CliTest, NoCommandIsAUsageError) { EXPECT_EQ(RunCli("").exit_code, 1); }
 
 TEST_F(CliTest, MissingScanNamesTheFile) {
   Output out = RunCli("preprocess " + Path("nope.exr") + " --out " + Path("out"));
@@ -355,6 +356,165 @@ TEST_F(CliTest, FitFromFilesAndItsErrors) {
   EXPECT_EQ(bad_rotation.exit_code, 1);
   EXPECT_NE(bad_rotation.text.find("not a rotation"), std::string::npos) << bad_rotation.text;
   EXPECT_NE(bad_rotation.text.find("edited.json"), std::string::npos) << bad_rotation.text;
+  EXPECT_FALSE(fs::exists(Path("g")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Issue 10, section 3: no confident answer from an absurd input.
+
+// Every usage error exits 1 (CLI11's own codes were 105, 106, 109, ...), with CLI11's message;
+// --help and --version exit 0.
+TEST_F(CliTest, UsageErrorsExitOneWithTheirMessage) {
+  std::ofstream(Path("calib.json")) << "{}";
+  const std::string photos = " --photos " + Path("calib.json") + " --out " + Path("out");
+  struct Case {
+    std::string args, says;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"fit" + photos + " --bogus", "--bogus"},
+           {"fit --out " + Path("out"), "--photos is required"},
+           {"fit" + photos + " --min-samples abc", "--min-samples"},
+           {"fit" + photos + " --method slow", "slow"},
+           {"fit --photos " + Path("absent.json") + " --out " + Path("out"), "absent.json"},
+           {"pack --canvas " + Path("") + " --fit " + Path("") + " --out x --height-bits",
+            "--height-bits"},
+           {"frobnicate --out x", "unknown command \"frobnicate\""},
+           {"--bogus", "unknown option \"--bogus\""},
+       }) {
+    const Output out = RunCli(c.args);
+    EXPECT_EQ(out.exit_code, 1) << c.args << "\n" << out.text;
+    EXPECT_NE(out.text.find(c.says), std::string::npos) << c.args << "\n" << out.text;
+    EXPECT_FALSE(fs::exists(Path("out"))) << c.args;
+  }
+  const Output version = RunCli("--version");
+  EXPECT_EQ(version.exit_code, 0) << version.text;
+  EXPECT_EQ(version.text.rfind("digitize ", 0), 0u) << version.text;
+  EXPECT_EQ(RunCli("fit --help").exit_code, 0);
+}
+
+// Writes a w x h mid-grey 8-bit PNG.
+void WriteGreyPng(const std::string& path, int w = 8, int h = 8) {
+  std::vector<unsigned char> px(static_cast<size_t>(w) * h * 3, 120);
+  auto out = OIIO::ImageOutput::create(path);
+  ASSERT_TRUE(out) << path;
+  ASSERT_TRUE(out->open(path, OIIO::ImageSpec(w, h, 3, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+  out->close();
+}
+
+// RTI captures: one photo cannot constrain the model (it used to give 100 % "too few samples" and
+// a black pack, exit 0); lights below the canvas are a warning with their count; duplicate images
+// and extra columns name the line.
+TEST_F(CliTest, RtiCapturesThatCannotConstrainTheModelAreRefused) {
+  for (int i = 0; i < 10; ++i) WriteGreyPng(Path("img" + std::to_string(i) + ".png"));
+  std::ofstream(Path("one.lp")) << "1\nimg0.png 0.1 0.2 0.9\n";
+  Output one = RunCli("fit --photos " + Path("one.lp") + " --out " + Path("f"));
+  EXPECT_EQ(one.exit_code, 1) << one.text;
+  for (const char* words : {"one.lp", "only 1 distinct", "at least 8", "too few samples"})
+    EXPECT_NE(one.text.find(words), std::string::npos) << words << "\n" << one.text;
+  EXPECT_FALSE(fs::exists(Path("f")));
+  Output run_one = RunCli("run --photos " + Path("one.lp") + " --out " + Path("p.pack.exr"));
+  EXPECT_EQ(run_one.exit_code, 1) << run_one.text;
+  EXPECT_NE(run_one.text.find("only 1 distinct"), std::string::npos) << run_one.text;
+  EXPECT_FALSE(fs::exists(Path("p.pack.exr")));
+
+  // Eight lights above the canvas and two below it: fitted, with a warning and its count.
+  {
+    std::ofstream lp(Path("ten.lp"));
+    lp << "10\n";
+    for (int i = 0; i < 10; ++i) {
+      const double a = 0.7 * i, z = i < 8 ? 0.5 + 0.05 * i : -0.3;
+      lp << "img" << i << ".png " << std::cos(a) << " " << std::sin(a) << " " << z << "\n";
+    }
+  }
+  Output ten = RunCli("fit --photos " + Path("ten.lp") + " --out " + Path("f"));
+  ASSERT_EQ(ten.exit_code, 0) << ten.text;
+  EXPECT_NE(ten.text.find("digitize fit: warning: 2 of 10 photos have their light at or below the "
+                          "canvas plane"),
+            std::string::npos)
+      << ten.text;
+  EXPECT_NE(ten.text.find("ten.lp, line 10"), std::string::npos) << ten.text;
+  {
+    std::ifstream in(Path("f/report.json"));
+    const auto report = nlohmann::json::parse(in);
+    EXPECT_EQ(report["photos"]["light_below_canvas"], 2);
+    EXPECT_EQ(report["photos"]["count"], 10);
+    EXPECT_EQ(report["warnings"].size(), 1u);
+  }
+  Output run = RunCli("run --photos " + Path("ten.lp") + " --out " + Path("p.pack.exr"));
+  ASSERT_EQ(run.exit_code, 0) << run.text;
+  EXPECT_NE(run.text.find("digitize run: warning: 2 of 10 photos"), std::string::npos) << run.text;
+
+  // The same image twice, and a line with a fourth number.
+  std::ofstream(Path("dup.lp")) << "2\nimg1.png 0 0 1\n./img1.png 0 1 1\n";
+  Output dup = RunCli("fit --photos " + Path("dup.lp") + " --out " + Path("g"));
+  EXPECT_EQ(dup.exit_code, 1) << dup.text;
+  EXPECT_NE(dup.text.find("dup.lp, line 3"), std::string::npos) << dup.text;
+  EXPECT_NE(dup.text.find("same image as " + Path("dup.lp") + ", line 2"), std::string::npos)
+      << dup.text;
+  std::ofstream(Path("cols.lp")) << "1\nimg1.png 0.1 0.2 0.9 0.5\n";
+  Output cols = RunCli("fit --photos " + Path("cols.lp") + " --out " + Path("g"));
+  EXPECT_EQ(cols.exit_code, 1) << cols.text;
+  EXPECT_NE(cols.text.find("cols.lp, line 2: expected \"filename x y z\""), std::string::npos)
+      << cols.text;
+  EXPECT_FALSE(fs::exists(Path("g")));
+}
+
+// One definition of a canvas folder (kCanvasFolderFiles): `fit --canvas` and `pack --canvas`
+// refuse the same incomplete folder with the same message; absurd intrinsics and duplicate
+// entries in a calibration name the file and the entry.
+TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
+  ASSERT_EQ(RunCli("synth --out " + Path("s") +
+                   " --resolution 96 --scan-size 120 120 --photos --lights 8 --seed 5")
+                .exit_code,
+            0);
+  ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
+  const std::string photos = " --photos " + Path("s/photos/calib.json");
+  Output fit = RunCli("fit --canvas " + Path("c") + photos + " --out " + Path("f"));
+  ASSERT_EQ(fit.exit_code, 0) << fit.text;
+  for (const char* file : {"height.exr", "mask.png", "normals.exr", "transform.json", "boxes.json",
+                           "report.json"}) {
+    fs::remove_all(Path("c2"));
+    fs::copy(Path("c"), Path("c2"));
+    fs::remove(Path("c2") + "/" + file);
+    const std::string says = Path("c2") + ": not a canvas folder (written by `digitize preprocess`): " +
+                             file + " is missing";
+    Output f = RunCli("fit --canvas " + Path("c2") + photos + " --out " + Path("g"));
+    EXPECT_EQ(f.exit_code, 1) << f.text;
+    EXPECT_NE(f.text.find(says), std::string::npos) << file << "\n" << f.text;
+    Output p = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("p.pack.exr"));
+    EXPECT_EQ(p.exit_code, 1) << p.text;
+    EXPECT_NE(p.text.find(says), std::string::npos) << file << "\n" << p.text;
+  }
+  EXPECT_FALSE(fs::exists(Path("g")));
+  EXPECT_FALSE(fs::exists(Path("p.pack.exr")));
+  // canvas_mask_scan.png is written for the user, required by nobody.
+  fs::remove_all(Path("c2"));
+  fs::copy(Path("c"), Path("c2"));
+  fs::remove(Path("c2/canvas_mask_scan.png"));
+  EXPECT_EQ(RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("p.pack.exr")).exit_code, 0);
+
+  std::ifstream in(Path("s/photos/calib.json"));
+  const nlohmann::json doc = nlohmann::json::parse(in);
+  nlohmann::json edited = doc;
+  edited["cameras"][0]["fx"] = 1e-300;  // "76.9 % converged" before
+  std::ofstream(Path("s/photos/edited.json")) << edited.dump(1);
+  Output fx = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/edited.json") +
+                     " --out " + Path("g"));
+  EXPECT_EQ(fx.exit_code, 1) << fx.text;
+  EXPECT_NE(fx.text.find("edited.json: cameras[0].fx 1e-300 px gives a horizontal field of view of 180 deg"),
+            std::string::npos)
+      << fx.text;
+  edited = doc;
+  edited["images"].push_back(doc["images"][3]);
+  std::ofstream(Path("s/photos/edited.json")) << edited.dump(1);
+  Output dup = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/edited.json") +
+                      " --out " + Path("g"));
+  EXPECT_EQ(dup.exit_code, 1) << dup.text;
+  EXPECT_NE(dup.text.find("edited.json: images[8]"), std::string::npos) << dup.text;
+  EXPECT_NE(dup.text.find("same image as " + Path("s/photos/edited.json") + ": images[3]"),
+            std::string::npos)
+      << dup.text;
   EXPECT_FALSE(fs::exists(Path("g")));
 }
 

@@ -43,6 +43,9 @@ int RunFit(FitArgs args) {
   args.options.samples.trace.num_threads = args.threads;
   if (Status s = args.photo.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+  // Before the photos are loaded: an incomplete canvas folder fails in a moment, not a minute.
+  if (!args.canvas.empty())
+    if (Status s = CheckCanvasFolder(args.canvas); !s.ok()) return Fail(cmd, s.message());
 
   ProgressBar bar("fit");
   Result<PhotoSet> set = ReadPhotoSetFile(args.photos, args.photo, bar.Callback());
@@ -78,6 +81,7 @@ int RunFit(FitArgs args) {
     return WriteReflectanceOutputs(dir, *result, args.options, inputs);
   });
   if (!written.ok()) return Fail(cmd, written.message());
+  for (const std::string& w : result->report.Warnings()) Warn(cmd, w);
   std::printf("photos: %s\n", set->summary.Brief().c_str());
   std::printf("samples: %s\n", result->report.samples.Brief().c_str());
   if (result->report.dark_outliers > 0)

@@ -128,6 +128,7 @@ int Run(RunArgs args) {
     score = *s;
   }
   bar.Finish();
+  for (const std::string& w : fit->report.Warnings()) Warn(cmd, w);
   if (preprocessed)
     for (const StepReport& step : preprocessed->steps)
       std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());

@@ -1,6 +1,9 @@
 // Subcommands of the `digitize` tool. Each Add*Command registers its flags on `app` and, when
-// chosen, stores its exit code in `exit_code` (0 ok, 1 bad input or failure; CLI11 uses 2+ for
-// usage errors). Tools stay thin: flags -> options -> library call -> exit code.
+// chosen, stores its exit code in `exit_code`: 0 ok, 1 bad input or failure. Usage errors (an
+// unknown flag or command, a missing required option, a value of the wrong type) exit 1 too, with
+// CLI11's message (main.cpp maps its 105, 106, 109, ... onto 1); `--help` and `--version` exit 0;
+// 3 is an internal error (a broken invariant). Tools stay thin: flags -> options -> library call
+// -> exit code.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -65,5 +68,7 @@ void AddPreprocessFlags(CLI::App* command, PreprocessOptions& options);
 
 // Prints "digitize <command>: error: <message>" on stderr and returns 1.
 int Fail(const std::string& command, const std::string& message);
+// Prints "digitize <command>: warning: <message>" on stderr (the command goes on).
+void Warn(const std::string& command, const std::string& message);
 
 }  // namespace digitize::cli

@@ -1,6 +1,7 @@
 // digitize: scanned painting -> relightable digital copy. See README.md and `digitize --help`.
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include "commands.h"
 #include "digitize/core.h"
@@ -10,6 +11,10 @@ namespace digitize::cli {
 int Fail(const std::string& command, const std::string& message) {
   std::fprintf(stderr, "digitize %s: error: %s\n", command.c_str(), message.c_str());
   return 1;
+}
+
+void Warn(const std::string& command, const std::string& message) {
+  std::fprintf(stderr, "digitize %s: warning: %s\n", command.c_str(), message.c_str());
 }
 
 }  // namespace digitize::cli
@@ -32,7 +37,19 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // A mistyped command or option before it reads to CLI11 as "a subcommand is required": say
+    // what was not understood.
+    if (app.get_subcommands().empty() && !app.remaining().empty()) {
+      const std::string word = app.remaining().front();  // remaining() returns a copy
+      std::string commands;
+      for (const CLI::App* c : app.get_subcommands({})) commands += " " + c->get_name();
+      std::fprintf(stderr, "digitize: error: unknown %s \"%s\" (commands:%s)\n",
+                   word.rfind('-', 0) == 0 ? "option" : "command", word.c_str(), commands.c_str());
+      return 1;
+    }
+    // CLI11 prints the message (or the help / version text) and returns its own code: 0 for
+    // --help / --version, 105, 106, 109, ... for usage errors. Every user error exits 1.
+    return app.exit(e) == 0 ? 0 : 1;
   } catch (const digitize::InvariantError& e) {
     std::fprintf(stderr, "digitize: internal error (please report): %s\n", e.what());
     return 3;
