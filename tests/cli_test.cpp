@@ -472,17 +472,19 @@ TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
   const std::string photos = " --photos " + Path("s/photos/calib.json");
   Output fit = RunCli("fit --canvas " + Path("c") + photos + " --out " + Path("f"));
   ASSERT_EQ(fit.exit_code, 0) << fit.text;
-  for (const char* file : {"height.exr", "mask.png", "normals.exr", "transform.json", "boxes.json",
-                           "report.json"}) {
+  for (const char* file :
+       {"height.exr", "mask.png", "normals.exr", "transform.json", "boxes.json", "report.json"}) {
     fs::remove_all(Path("c2"));
     fs::copy(Path("c"), Path("c2"));
     fs::remove(Path("c2") + "/" + file);
-    const std::string says = Path("c2") + ": not a canvas folder (written by `digitize preprocess`): " +
-                             file + " is missing";
+    const std::string says = Path("c2") +
+                             ": not a canvas folder (written by `digitize preprocess`): " + file +
+                             " is missing";
     Output f = RunCli("fit --canvas " + Path("c2") + photos + " --out " + Path("g"));
     EXPECT_EQ(f.exit_code, 1) << f.text;
     EXPECT_NE(f.text.find(says), std::string::npos) << file << "\n" << f.text;
-    Output p = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("p.pack.exr"));
+    Output p = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " +
+                      Path("p.pack.exr"));
     EXPECT_EQ(p.exit_code, 1) << p.text;
     EXPECT_NE(p.text.find(says), std::string::npos) << file << "\n" << p.text;
   }
@@ -492,7 +494,8 @@ TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
   fs::remove_all(Path("c2"));
   fs::copy(Path("c"), Path("c2"));
   fs::remove(Path("c2/canvas_mask_scan.png"));
-  EXPECT_EQ(RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("p.pack.exr")).exit_code, 0);
+  const std::string pack = "pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out ";
+  EXPECT_EQ(RunCli(pack + Path("p.pack.exr")).exit_code, 0);
 
   std::ifstream in(Path("s/photos/calib.json"));
   const nlohmann::json doc = nlohmann::json::parse(in);
@@ -502,7 +505,8 @@ TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
   Output fx = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/edited.json") +
                      " --out " + Path("g"));
   EXPECT_EQ(fx.exit_code, 1) << fx.text;
-  EXPECT_NE(fx.text.find("edited.json: cameras[0].fx 1e-300 px gives a horizontal field of view of 180 deg"),
+  EXPECT_NE(fx.text.find(
+                "edited.json: cameras[0].fx 1e-300 px gives a horizontal field of view of 180 deg"),
             std::string::npos)
       << fx.text;
   edited = doc;

@@ -702,8 +702,9 @@ TEST(CameraTest, CanvasFootprintMustBeUsable) {
   s = CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.001, "cam");
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("spans 500 texels"), std::string::npos) << s.message();
-  EXPECT_TRUE(CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.5 / kMaxTexelsPerPixel * 1.01,
-                                   "cam").ok());
+  EXPECT_TRUE(
+      CheckCanvasFootprint(cam, RigidTransform{}, extent, 0.5 / kMaxTexelsPerPixel * 1.01, "cam")
+          .ok());
 
   // An orthographic camera of 0.1 um pixels: one 0.5 mm texel spans 5000 px.
   Camera ortho = cam;

@@ -152,15 +152,18 @@ TEST(ReflectanceFit, OnePhotoIsRefusedNamingTheCountAndTheMinimum) {
   const HeightField canvas = FlatCanvas(6, 6);
   LafortuneParams m;
   m.rho_d = Vec3f::Constant(0.3f);
-  auto fit = FitReflectance(canvas, UpNormals(canvas), {}, RenderFlat(canvas, m, {Directional(50, 0)}), {});
+  auto fit = FitReflectance(canvas, UpNormals(canvas), {},
+                            RenderFlat(canvas, m, {Directional(50, 0)}), {});
   ASSERT_FALSE(fit.ok());
   for (const char* words : {"analytic.json", "only 1 distinct", "in 1 photo", "at least 8",
                             "min_samples 8", "too few samples"})
-    EXPECT_NE(fit.error().message.find(words), std::string::npos) << words << ": " << fit.error().message;
+    EXPECT_NE(fit.error().message.find(words), std::string::npos)
+        << words << ": " << fit.error().message;
   // The minimum follows min_samples, but never drops below kMinDistinctPhotoDirections.
   ReflectanceFitOptions o;
   o.fit.min_samples = 1;
-  fit = FitReflectance(canvas, UpNormals(canvas), {}, RenderFlat(canvas, m, {Directional(50, 0)}), o);
+  fit =
+      FitReflectance(canvas, UpNormals(canvas), {}, RenderFlat(canvas, m, {Directional(50, 0)}), o);
   ASSERT_FALSE(fit.ok());
   EXPECT_NE(fit.error().message.find("at least 2"), std::string::npos) << fit.error().message;
   const PhotoSet seven = RenderFlat(canvas, m, Dome(7));
@@ -390,7 +393,6 @@ TEST(ReflectanceFit, MapsRoundTripThroughTheOutputFolder) {
   EXPECT_NE(missing.error().message.find("lobe.exr"), std::string::npos);
   std::filesystem::remove_all(dir);
 }
-
 
 // Lights at or below the canvas plane: a warning naming how many photos, in the report and its
 // JSON; not an error while enough photos are left, and counted out of the minimum otherwise.

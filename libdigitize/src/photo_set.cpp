@@ -721,8 +721,8 @@ Status Camera::Validate(const std::string& what) const {
     const auto fov_deg = [](int size, double f) {
       return 2.0 * std::atan(size / (2.0 * f)) * 180.0 / M_PI;
     };
-    for (const auto& [key, size, f, way] : {std::tuple{"fx", width, fx, "horizontal"},
-                                            std::tuple{"fy", height, fy, "vertical"}}) {
+    for (const auto& [key, size, f, way] :
+         {std::tuple{"fx", width, fx, "horizontal"}, std::tuple{"fy", height, fy, "vertical"}}) {
       const double fov = fov_deg(size, f);
       if (!(fov >= kMinFieldOfViewDeg && fov <= kMaxFieldOfViewDeg)) {
         return bad(key, Num(f) + " px gives a " + way + " field of view of " + Num(fov) +

@@ -180,9 +180,10 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
   if (report.distinct_directions < needed) {
     const int n = report.distinct_directions;
     const size_t below = report.light_below_canvas.size();
-    return Error{photos.source.string() + ": only " + std::to_string(n) + " distinct (light, view) " +
-                 (n == 1 ? "pair" : "pairs") + " with the light above the canvas, in " +
-                 std::to_string(report.photos) + (report.photos == 1 ? " photo" : " photos") +
+    return Error{photos.source.string() + ": only " + std::to_string(n) +
+                 " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
+                 " with the light above the canvas, in " + std::to_string(report.photos) +
+                 (report.photos == 1 ? " photo" : " photos") +
                  (below ? " (" + std::to_string(below) + " lit from at or below the canvas)" : "") +
                  "; the fit needs at least " + std::to_string(needed) + " (min_samples " +
                  std::to_string(options.fit.min_samples) +

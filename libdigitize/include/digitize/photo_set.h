@@ -53,8 +53,8 @@ enum class CameraModel { kPinhole, kOrthographic };
 // camera: `fx: 1e-300` (a 180-degree view) fitted "76.9 % converged" with every texel sampling
 // one pixel. Camera::Validate checks the first two, CheckCanvasFootprint the others
 // (docs/formats.md, "Bounds on cameras").
-inline constexpr double kMinFieldOfViewDeg = 0.1;  // pinhole, horizontal and vertical: a 600 mm
-                                                   // lens on a full-frame sensor sees 3.4 deg
+inline constexpr double kMinFieldOfViewDeg = 0.1;    // pinhole, horizontal and vertical: a 600 mm
+                                                     // lens on a full-frame sensor sees 3.4 deg
 inline constexpr double kMaxFieldOfViewDeg = 170.0;  // fisheyes need undistorting first anyway
 inline constexpr double kMaxPrincipalPointOffset = 1.0;  // image widths / heights the principal
                                                          // point may lie beyond the image's edge

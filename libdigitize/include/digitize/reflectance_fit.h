@@ -60,12 +60,12 @@ struct ReflectanceFitOptions {
 // plane (canvas Z <= 0: a point light's position, a directional light's direction) give no sample
 // and do not count.
 inline constexpr int kMinDistinctPhotoDirections = 2;  // a diffuse fit's chi-square test needs
-                                                      // 3 N - 3 > 0 degrees of freedom
+                                                       // 3 N - 3 > 0 degrees of freedom
 inline constexpr double kSameDirectionDeg = 0.5;
 
 struct ReflectanceFitReport {
-  size_t photos = 0;                  // in the set
-  int distinct_directions = 0;        // distinct (light, view) pairs with the light above the canvas
+  size_t photos = 0;            // in the set
+  int distinct_directions = 0;  // distinct (light, view) pairs with the light above the canvas
   // Photos whose light is at or below the canvas plane: a warning, not an error (their samples
   // are rejected, n.l <= 0); their entries, in set order.
   std::vector<std::string> light_below_canvas;
