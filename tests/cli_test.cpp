@@ -228,6 +228,13 @@ TEST_F(CliTest, PackRunInspectVerify) {
   EXPECT_EQ(RunCli("verify " + Path("r.pack.exr")).exit_code, 0);
   const auto jr = InspectJson(Path("r.pack.exr"));
   EXPECT_GE(jr["provenance"]["inputs"].size(), 18u);  // scan + calibration + 16 photos
+  // Named relative to the calibration file, never as this machine's absolute paths.
+  std::vector<std::string> names;
+  for (const auto& in : jr["provenance"]["inputs"]) names.push_back(in.value("name", ""));
+  EXPECT_EQ(names[0], "../scan.exr");
+  EXPECT_EQ(names[1], "calib.json");
+  EXPECT_EQ(names[2].rfind("images/", 0), 0u) << names[2];
+  for (const std::string& n : names) EXPECT_EQ(n.find(dir_.string()), std::string::npos) << n;
 
   // A damaged pack: verify and inspect fail, naming the file.
   {

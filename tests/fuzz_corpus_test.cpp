@@ -11,13 +11,18 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "digitize/pack.h"
 #include "digitize/photo_set.h"
+#include "digitize_viewer/gallery.h"
+#include "digitize_viewer/painting_setup.h"
 #include "fuzz/parser_contract.h"
+#include "fuzz/viewer_contract.h"
+#include "pack_forge.h"
 
 namespace digitize {
 namespace {
@@ -105,6 +110,22 @@ TEST(FuzzCorpusTest, PackSeedsKeepTheContract) {
       "fuzz_pack",
       [](const std::string& /*bytes*/, const fs::path& file) { return ReadPack(file).ok(); },
       [](const std::string& /*bytes*/, const fs::path& file) { return fuzz::CheckPackFile(file); });
+  EXPECT_GE(tally.valid, kMinValidSeeds);
+  EXPECT_GE(tally.bad, kMinBadSeeds);
+}
+
+// The viewer's load path: valid_* packs load and hang, bad_* are refused (at load or by the
+// set-up), and every file keeps the contract of viewer_contract.h.
+TEST(FuzzCorpusTest, ViewerLoadSeedsKeepTheContract) {
+  const Tally tally = ReplayCorpus(
+      "fuzz_viewer_load",
+      [](const std::string& /*bytes*/, const fs::path& file) {
+        auto pack = viewer::LoadPackForViewer(file);
+        return pack.ok() && viewer::PreparePainting(*pack, file.string()).ok();
+      },
+      [](const std::string& /*bytes*/, const fs::path& file) {
+        return fuzz::CheckViewerLoadFile(file);
+      });
   EXPECT_GE(tally.valid, kMinValidSeeds);
   EXPECT_GE(tally.bad, kMinBadSeeds);
 }
@@ -282,6 +303,35 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   newer[at + key.size() + 4] = '9';
   WriteBytes(dir / "bad_newer_version.exr", newer);
   WriteBytes(dir / "bad_not_exr.exr", "digitize.pack, but not an OpenEXR file\n");
+  // Forged headers with a recomputed checksum (pack_forge.h): physically absurd metadata that
+  // every finiteness check lets through (issue 10: pitch_mm = 1e308 aborted the viewer).
+  const std::vector<std::pair<std::string, std::map<std::string, std::string>>> forged = {
+      {"bad_forged_pitch_1e308.exr", {{"digitize:pitch_mm", "1e308"}}},
+      {"bad_forged_pitch_tiny.exr", {{"digitize:pitch_mm", "1e-300"}}},
+      {"bad_forged_size_mm.exr", {{"digitize:size_mm", "1e308 x 1e308"}}},
+      {"bad_forged_max_height.exr", {{"digitize:max_height_mm", "1e30"}}},
+      {"bad_forged_translation.exr",
+       {{"digitize:canvas_from_scan",
+         R"({"rotation":[[1,0,0],[0,1,0],[0,0,1]],"translation_mm":[0,0,1e300]})"}}},
+  };
+  for (const auto& [name, attributes] : forged)
+    ASSERT_EQ(forge::ForgePack(dir / "valid_uncompressed_8x8_box.exr", dir / name, attributes), "");
+
+  // The viewer's load path: the valid packs above, the forged ones, and packs that load but that
+  // the viewer cannot hang (under 2 x 2 texels).
+  const fs::path viewer_dir = CorpusDir("fuzz_viewer_load");
+  fs::create_directories(viewer_dir);
+  for (const char* name : {"valid_half_8x8_box.exr", "valid_quantised_9x5.exr",
+                           "valid_uncompressed_8x8_box.exr", "bad_forged_pitch_1e308.exr",
+                           "bad_forged_max_height.exr", "bad_forged_translation.exr",
+                           "bad_truncated.exr"})
+    fs::copy_file(dir / name, viewer_dir / name, fs::copy_options::overwrite_existing);
+  {
+    Pack line = TinyPack(1, 6, false);
+    ASSERT_TRUE(WritePack(viewer_dir / "bad_one_texel_wide.exr", line).ok());
+    PackWriteOptions none;
+    ASSERT_TRUE(WritePack(viewer_dir / "valid_2x2.exr", TinyPack(2, 2, false), none).ok());
+  }
   {  // A plain single-part EXR, 4x4 RGB.
     const std::string plain = (dir / "bad_single_part.exr").string();
     auto out = OIIO::ImageOutput::create(plain);

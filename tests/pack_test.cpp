@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <random>
 #include <string>
 #include <vector>
@@ -19,6 +20,7 @@
 #include "digitize/relief.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
+#include "pack_forge.h"
 
 namespace digitize {
 namespace {
@@ -446,6 +448,114 @@ TEST(Pack, SyntheticPaintingRoundTrips) {
   EXPECT_LT(fs::file_size(dir / "q.pack.exr"), fs::file_size(dir / "h.pack.exr"));
   EXPECT_TRUE(VerifyPack(dir / "h.pack.exr").ok());
   EXPECT_TRUE(VerifyPack(dir / "q.pack.exr").ok());
+  fs::remove_all(dir);
+}
+
+// A pack is shared between institutions: its checksum can be recomputed by anyone (an integrity
+// check, not authentication), so physically absurd metadata must be refused on its own, by the
+// reader, InspectPack and VerifyPack alike, naming the file and the attribute.
+TEST(Pack, ForgedAbsurdMetadataIsRefused) {
+  const fs::path dir = TempDir("forged");
+  const Pack p = MakeTestPack(64, 48, 15);  // pitch 0.125 mm: 8 x 6 mm
+  ASSERT_OK(WritePack(dir / "good.pack.exr", p));
+  // The forgery itself is sound: unchanged attributes and a recomputed checksum read back.
+  ASSERT_EQ(forge::ForgePack(dir / "good.pack.exr", dir / "resealed.pack.exr", {}), "");
+  auto same = VerifyPack(dir / "resealed.pack.exr");
+  ASSERT_TRUE(same.ok()) << same.error().message;
+  const std::string rotation = R"("rotation":[[1,0,0],[0,1,0],[0,0,1]])";
+  struct Case {
+    const char* name;
+    std::map<std::string, std::string> attributes;
+    const char* expect;  // in the message, after the file name
+  };
+  const std::vector<Case> cases = {
+      {"pitch_1e308", {{"digitize:pitch_mm", "1e308"}}, "digitize:pitch_mm 1e+308 x 64 texels"},
+      {"pitch_tiny", {{"digitize:pitch_mm", "1e-300"}}, "digitize:pitch_mm 1e-300 is not a texel pitch"},
+      // 2 m texels: 128 m wide, with a size_mm that agrees, so the bound is what refuses it.
+      {"pitch_2000", {{"digitize:pitch_mm", "2000"}, {"digitize:size_mm", "128000 x 96000"}},
+       "digitize:pitch_mm 2000 x 64 texels = 128000 mm, beyond the 100 m"},
+      {"max_height", {{"digitize:max_height_mm", "1e30"}}, "digitize:max_height_mm 1e+30 is outside"},
+      {"delta0", {{"digitize:delta0_mm", "-1"}}, "digitize:delta0_mm -1 is not in"},
+      {"size_mm", {{"digitize:size_mm", "800 x 600"}}, "digitize:size_mm 800 x 600 mm disagrees"},
+      {"size_mm_text", {{"digitize:size_mm", "big"}}, "header attribute digitize:size_mm = \"big\" is not"},
+      {"translation",
+       {{"digitize:canvas_from_scan", "{" + rotation + R"(,"translation_mm":[0,0,1e12]})"}},
+       "digitize:canvas_from_scan translation (0, 0, 1e+12) mm is farther than 100 m"},
+      {"rotation",
+       {{"digitize:canvas_from_scan",
+         R"({"rotation":[[2,0,0],[0,2,0],[0,0,2]],"translation_mm":[0,0,0]})"}},
+       "digitize:canvas_from_scan rotation is not a rotation"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const fs::path forged = dir / (std::string(c.name) + ".pack.exr");
+    ASSERT_EQ(forge::ForgePack(dir / "good.pack.exr", forged, c.attributes), "");
+    const std::string want = forged.string() + ": " + c.expect;
+    auto read = ReadPack(forged);
+    ASSERT_FALSE(read.ok());
+    EXPECT_NE(read.error().message.find(want), std::string::npos) << read.error().message;
+    auto inspect = InspectPack(forged);
+    ASSERT_FALSE(inspect.ok());
+    EXPECT_EQ(inspect.error().message, read.error().message);
+    auto verify = VerifyPack(forged);
+    ASSERT_FALSE(verify.ok());
+    EXPECT_EQ(verify.error().message, read.error().message);
+  }
+  fs::remove_all(dir);
+}
+
+// The same bounds in memory: the writer refuses what the reader would, so no tool writes a pack
+// that no reader opens.
+TEST(Pack, ValidateAppliesThePhysicalBounds) {
+  const Pack good = MakeTestPack(32, 24, 16);
+  ASSERT_OK(good.Validate());
+  auto refused = [](Pack p, auto edit, const std::string& expect) {
+    edit(p);
+    const Status s = p.Validate();
+    EXPECT_FALSE(s.ok()) << expect;
+    EXPECT_NE(s.message().find(expect), std::string::npos) << s.message();
+  };
+  refused(good, [](Pack& p) { p.field.pitch_mm = 1e308; }, "pitch_mm 1e+308 x 32 texels");
+  refused(good, [](Pack& p) { p.field.pitch_mm = 1e-9; }, "is not a texel pitch");
+  refused(good, [](Pack& p) { p.field.pitch_mm = kMaxPackExtentMm / 31; }, "beyond the 100 m");
+  refused(good, [](Pack& p) { p.field.height_mm(3, 4) = 2000.0f; }, "height at texel 3, 4 = 2000");
+  refused(good, [](Pack& p) { p.max_height_mm = 5000; }, "max_height_mm 5000 is outside");
+  refused(good, [](Pack& p) { p.canvas_from_scan.translation.x() = 2e5; }, "farther than 100 m");
+  refused(good, [](Pack& p) { p.canvas_from_scan.rotation *= 1.01; }, "is not a rotation");
+  // At the bounds themselves: accepted (100 m exactly, heights of 1 m).
+  Pack edge = good;
+  edge.field.pitch_mm = kMaxPackExtentMm / 32;
+  EXPECT_TRUE(edge.Validate().ok()) << edge.Validate().message();
+  const fs::path dir = TempDir("bounds");
+  Pack absurd = good;
+  absurd.field.pitch_mm = 1e308;
+  const Status s = WritePack(dir / "absurd.pack.exr", absurd);
+  ASSERT_FALSE(s.ok());
+  EXPECT_FALSE(fs::exists(dir / "absurd.pack.exr"));
+  fs::remove_all(dir);
+}
+
+// Provenance names inputs relative to a folder (the calibration file's), never as absolute paths
+// of the machine that made the pack.
+TEST(Pack, ProvenanceInputsAreRelative) {
+  const fs::path dir = TempDir("provenance");
+  fs::create_directories(dir / "capture" / "images");
+  fs::create_directories(dir / "scans");
+  for (const fs::path& f : {dir / "capture" / "calib.json", dir / "capture" / "images" / "a.png",
+                            dir / "scans" / "scan.exr"})
+    WriteBytes(f, {'x'});
+  PackProvenance p;
+  ASSERT_OK(AddProvenanceInputs(p, {dir / "scans" / "scan.exr", dir / "capture" / "calib.json",
+                                    dir / "capture" / "images" / "a.png"},
+                                dir / "capture"));
+  ASSERT_EQ(p.inputs.size(), 3u);
+  EXPECT_EQ(p.inputs[0].name, "../scans/scan.exr");
+  EXPECT_EQ(p.inputs[1].name, "calib.json");
+  EXPECT_EQ(p.inputs[2].name, "images/a.png");
+  PackProvenance plain;
+  ASSERT_OK(AddProvenanceInputs(plain, {fs::absolute(dir / "scans" / "scan.exr")}));
+  EXPECT_EQ(plain.inputs[0].name, "scan.exr");
+  for (const PackInput& in : p.inputs) EXPECT_EQ(in.name.find(dir.string()), std::string::npos);
   fs::remove_all(dir);
 }
 

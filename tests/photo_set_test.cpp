@@ -498,6 +498,33 @@ TEST_F(CalibrationTest, HostileFiles) {
   ExpectError(ReadCalibration(Path("calib.json"), bad), {"saturation_encoded"});
 }
 
+// A shared capture must not make the reader open files outside its folder: "..", absolute paths
+// and symbolic links that leave it are refused, naming the file, the entry and the path, unless
+// allow_outside_paths says otherwise.
+TEST_F(CalibrationTest, ImagePathsOutsideTheCaptureFolderAreRefused) {
+  fs::create_directories(Path("capture/images"));
+  fs::copy_file(Path("a.png"), Path("capture/images/a.png"));
+  fs::create_symlink(Path("b.png"), Path("capture/link.png"));
+  auto read = [&](const std::string& image, const PhotoSetOptions& options = {}) {
+    doc_["images"] = {{{"path", image}, {"camera", 0}, {"light", 0}}};
+    WriteText("capture/calib.json", doc_.dump(2));
+    return ReadCalibration(Path("capture/calib.json"), options);
+  };
+  EXPECT_TRUE(read("images/a.png").ok());
+  EXPECT_TRUE(read("images/../images/a.png").ok());  // ".." that stays inside
+  for (const std::string& outside : {std::string("../a.png"), Path("c.exr").string(),
+                                     std::string("link.png"), std::string("/etc/passwd")}) {
+    SCOPED_TRACE(outside);
+    ExpectError(read(outside),
+                {"capture/calib.json: images[0]", outside, "outside the capture folder",
+                 "--allow-outside-paths"});
+  }
+  PhotoSetOptions allow;
+  allow.allow_outside_paths = true;
+  EXPECT_TRUE(read("../a.png", allow).ok());
+  EXPECT_TRUE(read("link.png", allow).ok());
+}
+
 // ---------------------------------------------------------------------------------------------
 // Cameras and the canvas.
 
@@ -611,6 +638,28 @@ TEST_F(LpTest, Hostile) {
               {"dirs.lp", "line 3", "big.png", "9x6", "8x6"});
   // Not RTI: no flat canvas.
   EXPECT_FALSE(FlatCanvasForRti(PhotoSet{}).ok());
+}
+
+TEST_F(LpTest, ImagePathsOutsideTheCaptureFolderAreRefused) {
+  fs::create_directories(Path("capture"));
+  fs::copy_file(Path("i1.png"), Path("capture/i1.png"));
+  fs::create_symlink(Path("i2.png"), Path("capture/link.png"));
+  auto read = [&](const std::string& text, const PhotoSetOptions& options = {}) {
+    WriteText("capture/dirs.lp", text);
+    return ReadRtiCapture(Path("capture/dirs.lp"), options);
+  };
+  EXPECT_TRUE(read("1\ni1.png 0 0 1\n").ok());
+  ExpectError(read("2\ni1.png 0 0 1\n../i2.png 0 0 1\n"),
+              {"capture/dirs.lp, line 3", "../i2.png", "outside the capture folder"});
+  ExpectError(read("2\ni1.png 0 0 1\n" + Path("i2.png").string() + " 0 0 1\n"),
+              {"capture/dirs.lp, line 3", "outside the capture folder"});
+  ExpectError(read("2\ni1.png 0 0 1\nlink.png 0 0 1\n"),
+              {"capture/dirs.lp, line 3", "link.png", "outside the capture folder"});
+  // A path of the capture machine that does not exist here still falls back to the file name.
+  EXPECT_TRUE(read("1\n/capture-pc/day1/i1.png 0 0 1\n").ok());
+  PhotoSetOptions allow;
+  allow.allow_outside_paths = true;
+  EXPECT_TRUE(read("2\ni1.png 0 0 1\n../i2.png 0 0 1\n", allow).ok());
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -20,9 +20,11 @@
 #include "digitize_synth/truth_pack.h"
 #include "digitize_viewer/gallery.h"
 #include "digitize_viewer/gl_context.h"
+#include "digitize_viewer/painting_setup.h"
 #include "digitize_viewer/renderer.h"
 #include "digitize_viewer/scene_setup.h"
 #include "digitize_viewer/view.h"
+#include "pack_forge.h"
 
 namespace digitize::viewer {
 namespace {
@@ -500,6 +502,91 @@ TEST(ViewerTest, GalleryScreenshotIsWritten) {
   ExpectPlausible(
       Render(View(ViewDistance::kFramed, ViewAngle::kFace), Options(Technique::kHybrid)),
       "after the gallery screenshot");
+  std::filesystem::remove_all(dir);
+}
+
+// Packs are shared: a pack the viewer refuses is listed and the others hang without a gap; the
+// GL-free set-up (what the fuzz target runs) never yields a non-finite gallery.
+TEST(ViewerTest, RefusedPackIsListedAndTheOthersHang) {
+  Pack absurd = Get().pack;
+  absurd.field.pitch_mm = 1e308;  // what a forged header said before the reader refused it
+  Pack flat_line = Get().pack;
+  flat_line.field.height_mm = Grid<float>(1, 1);
+  const GalleryScene scene = HangPaintings(
+      {{"absurd.pack.exr", absurd}, {"good.pack.exr", Get().pack}, {"line.pack.exr", flat_line}});
+  ASSERT_EQ(scene.hung, std::vector<size_t>{1});
+  ASSERT_EQ(scene.failed.size(), 2u);
+  EXPECT_EQ(scene.failed[0].rfind("absurd.pack.exr: ", 0), 0u) << scene.failed[0];
+  EXPECT_NE(scene.failed[0].find("pitch_mm 1e+308"), std::string::npos) << scene.failed[0];
+  EXPECT_EQ(scene.failed[1].rfind("line.pack.exr: ", 0), 0u) << scene.failed[1];
+  ASSERT_EQ(scene.gallery.world_from_canvas.size(), 1u);
+  EXPECT_TRUE(scene.gallery.start.Validate().ok());
+  EXPECT_LT(scene.gallery.width_mm, 1e4);  // one 160 mm painting: the minimum room
+}
+
+// The pack file of issue 10 (pitch_mm = 1e308 with a recomputed checksum) is refused at load,
+// naming the file and the attribute; the viewer then hangs the good pack beside it.
+TEST(ViewerTest, ForgedPackFailsToLoadAndTheGoodOneRenders) {
+  REQUIRE_GL();
+  const auto dir = TempDir();
+  ASSERT_TRUE(WritePack(dir / "good.pack.exr", Get().pack).ok());
+  ASSERT_EQ(forge::ForgePack(dir / "good.pack.exr", dir / "forged.pack.exr",
+                             {{"digitize:pitch_mm", "1e308"}}),
+            "");
+  auto forged = LoadPackForViewer(dir / "forged.pack.exr");
+  ASSERT_FALSE(forged.ok());
+  EXPECT_NE(forged.error().message.find("forged.pack.exr: digitize:pitch_mm 1e+308"),
+            std::string::npos)
+      << forged.error().message;
+  auto good = LoadPackForViewer(dir / "good.pack.exr");
+  ASSERT_TRUE(good.ok()) << good.error().message;
+  // A refused pack in the list: the others render, it is reported, nothing aborts.
+  Pack absurd = *good;
+  absurd.max_height_mm = 1e30;
+  GalleryShotOptions shot;
+  shot.width = 96;
+  shot.height = 64;
+  std::vector<std::string> failed;
+  const auto png = dir / "gallery.png";
+  const Status s = RenderGalleryScreenshots({{"bad.pack.exr", absurd}, {"good.pack.exr", *good}},
+                                            png, {}, shot, &failed);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(failed.size(), 1u);
+  EXPECT_EQ(failed[0].rfind("bad.pack.exr: ", 0), 0u) << failed[0];
+  EXPECT_TRUE(std::filesystem::exists(png));
+  // Without a list to report into, the refusal is the error.
+  const Status strict = RenderGalleryScreenshots({{"bad.pack.exr", absurd}}, png, {}, shot);
+  ASSERT_FALSE(strict.ok());
+  EXPECT_NE(strict.message().find("bad.pack.exr"), std::string::npos) << strict.message();
+  std::filesystem::remove_all(dir);
+}
+
+// Image sizes this GL cannot render are an error naming the size, not an abort on an incomplete
+// framebuffer.
+TEST(ViewerTest, ImpossibleScreenshotSizesAreRefused) {
+  REQUIRE_GL();
+  Renderer& r = *Get().renderer;
+  EXPECT_TRUE(r.CheckImageSize(kW, kH).ok());
+  for (const auto& [w, h] : {std::pair{100000, 100000}, std::pair{20000, 100}, std::pair{100, 20000}}) {
+    const Status s = r.CheckImageSize(w, h);
+    ASSERT_FALSE(s.ok()) << w << "x" << h;
+    EXPECT_NE(s.message().find("a " + std::to_string(w) + "x" + std::to_string(h) +
+                               " image is larger than this OpenGL's maximum render target size"),
+              std::string::npos)
+        << s.message();
+  }
+  EXPECT_FALSE(r.CheckImageSize(0, 10).ok());
+  // Within the GL's limits (16384 on llvmpipe) but beyond the memory bound.
+  const Status big = r.CheckImageSize(16384, 16384);
+  ASSERT_FALSE(big.ok());
+  const auto dir = TempDir();
+  GalleryShotOptions shot;
+  shot.width = 100000;
+  shot.height = 100000;
+  const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "huge.png", {}, shot);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("100000x100000"), std::string::npos) << s.message();
+  EXPECT_FALSE(std::filesystem::exists(dir / "huge.png"));
   std::filesystem::remove_all(dir);
 }
 

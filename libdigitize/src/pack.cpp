@@ -108,6 +108,40 @@ json TransformJson(const RigidTransform& t) {
           {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
 }
 
+// The physical bounds of pack.h on what a pack states about its geometry. Each message starts
+// with the value's name (pitch_mm, delta0_mm, max_height_mm, canvas_from_scan) for the caller to
+// prefix: "pack: " in memory, "FILE: digitize:" for a header.
+Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, double max_height_mm,
+                           const RigidTransform& canvas_from_scan) {
+  if (!(std::isfinite(pitch_mm) && pitch_mm >= kMinPackPitchMm))
+    return Error{"pitch_mm " + Num(pitch_mm) + " is not a texel pitch (at least " +
+                 Num(kMinPackPitchMm) + " mm, finite)"};
+  const int texels = std::max(w, h);
+  const double extent_mm = pitch_mm * texels;
+  if (!(extent_mm <= kMaxPackExtentMm))
+    return Error{"pitch_mm " + Num(pitch_mm) + " x " + std::to_string(texels) + " texels = " +
+                 Num(extent_mm) + " mm, beyond the " + Num(kMaxPackExtentMm / 1000) +
+                 " m a painting may measure"};
+  if (!(std::isfinite(max_height_mm) && std::abs(max_height_mm) <= kMaxPackHeightMm))
+    return Error{"max_height_mm " + Num(max_height_mm) + " is outside [-" + Num(kMaxPackHeightMm) +
+                 ", " + Num(kMaxPackHeightMm) + "] mm"};
+  if (!(std::isfinite(delta0_mm) && delta0_mm >= 0 &&
+        (delta0_mm <= max_height_mm + 1e-9 || delta0_mm == 0)))
+    return Error{"delta0_mm " + Num(delta0_mm) + " is not in [0, max_height_mm " +
+                 Num(max_height_mm) + "]"};
+  const Mat3d& r = canvas_from_scan.rotation;
+  if (!r.allFinite() || !((r * r.transpose() - Mat3d::Identity()).norm() <= kPackRotationTolerance) ||
+      !(r.determinant() > 0))
+    return Error{"canvas_from_scan rotation is not a rotation (|R R^T - I| above " +
+                 Num(kPackRotationTolerance) + ", or det <= 0)"};
+  const Vec3d& t = canvas_from_scan.translation;
+  if (!t.allFinite() || !(t.norm() <= kMaxPackTranslationMm))
+    return Error{"canvas_from_scan translation (" + Num(t.x()) + ", " + Num(t.y()) + ", " +
+                 Num(t.z()) + ") mm is farther than " + Num(kMaxPackTranslationMm / 1000) +
+                 " m from the scanner"};
+  return Status::Ok();
+}
+
 std::string QuantisationText(const PackQuantisation& q) {
   return "height=" + std::to_string(q.height_bits) + ",normal=" + std::to_string(q.normal_bits) +
          ",rho=" + std::to_string(q.rho_bits) + ",lobe=" + std::to_string(q.lobe_bits);
@@ -170,10 +204,10 @@ Status CheckChannelList(const std::string& name, size_t part, const char* list, 
     if (size - pos < 16) return Error{where + " is truncated"};
     const int32_t pixel_type = i32(pos), x_sampling = i32(pos + 8), y_sampling = i32(pos + 12);
     if (pixel_type < 0 || pixel_type > 2)
-      return Error{where + ": channel \"" + channel.substr(0, 40) + "\" has unknown pixel type " +
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) + "\" has unknown pixel type " +
                    std::to_string(pixel_type)};
     if (x_sampling != 1 || y_sampling != 1)
-      return Error{where + ": channel \"" + channel.substr(0, 40) + "\" is subsampled (" +
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) + "\" is subsampled (" +
                    std::to_string(x_sampling) + ", " + std::to_string(y_sampling) +
                    "); a digitize pack never is"};
     pos += 16;
@@ -294,7 +328,7 @@ Result<double> ParseNumber(const std::string& file, const OIIO::ImageSpec& spec,
   double v = 0;
   const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
   if (r.ec != std::errc() || r.ptr != text.data() + text.size() || !std::isfinite(v))
-    return Error{file + ": header attribute " + key + " = \"" + text.substr(0, 40) +
+    return Error{file + ": header attribute " + key + " = \"" + EscapeForTerminal(text.substr(0, 40)) +
                  "\" is not a finite number"};
   return v;
 }
@@ -361,6 +395,34 @@ Result<RigidTransform> ParseTransform(const std::string& file, const std::string
   return t;
 }
 
+// digitize:size_mm ("W x H", mm) must say what pitch x texels says: a reader that shows one and
+// computes with the other would mislead.
+Status CheckSizeMm(const std::string& file, const std::string& text, const PackSummary& s) {
+  double size[2] = {0, 0};
+  const char* p = text.data();
+  const char* end = text.data() + text.size();
+  bool ok = true;
+  for (int i = 0; i < 2 && ok; ++i) {
+    const auto r = std::from_chars(p, end, size[i]);
+    ok = r.ec == std::errc() && std::isfinite(size[i]);
+    p = r.ptr;
+    if (ok && i == 0) {
+      ok = std::string_view(p, end - p).rfind(" x ", 0) == 0;
+      p += 3;
+    }
+  }
+  if (!ok || p != end)
+    return Error{file + ": header attribute digitize:size_mm = \"" +
+                 EscapeForTerminal(text.substr(0, 40)) + "\" is not \"WIDTH x HEIGHT\" in mm"};
+  const double want[2] = {s.width * s.pitch_mm, s.height * s.pitch_mm};
+  for (int i = 0; i < 2; ++i)
+    if (!(std::abs(size[i] - want[i]) <= kPackSizeTolerance * want[i]))
+      return Error{file + ": digitize:size_mm " + Num(size[0]) + " x " + Num(size[1]) +
+                   " mm disagrees with pitch_mm x texels = " + Num(want[0]) + " x " +
+                   Num(want[1]) + " mm"};
+  return Status::Ok();
+}
+
 struct Header {
   PackSummary summary;
   RigidTransform canvas_from_scan;
@@ -389,7 +451,7 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   s.file_bytes = bytes;
   const std::string format = spec.get_string_attribute("digitize:format");
   if (format != kPackFormatName)
-    return Error{file + ": not a digitize pack (header digitize:format is \"" + format.substr(0, 40) +
+    return Error{file + ": not a digitize pack (header digitize:format is \"" + EscapeForTerminal(format.substr(0, 40)) +
                  "\", expected \"" + kPackFormatName + "\")"};
   auto version = ParseNumber(file, spec, "digitize:version");
   if (!version.ok()) return version.error();
@@ -411,10 +473,6 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
     if (!v.ok()) return v.error();
     *target = *v;
   }
-  if (!(s.pitch_mm > 0)) return Error{file + ": digitize:pitch_mm must be > 0"};
-  if (!(s.delta0_mm >= 0 && s.delta0_mm <= s.max_height_mm + 1e-9) && !(s.delta0_mm == 0))
-    return Error{file + ": digitize:delta0_mm " + Num(s.delta0_mm) + " is not in [0, max_height_mm " +
-                 Num(s.max_height_mm) + "]"};
   auto cell = ParseNumber(file, spec, "digitize:cell_px");
   if (!cell.ok()) return cell.error();
   if (*cell != std::floor(*cell) || *cell < 1 || *cell > 65536)
@@ -431,17 +489,17 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
     const std::string q = spec.get_string_attribute("digitize:quantisation");
     int hb = -1, nb = -1, rb = -1, lb = -1;
     if (std::sscanf(q.c_str(), "height=%d,normal=%d,rho=%d,lobe=%d", &hb, &nb, &rb, &lb) != 4)
-      return Error{file + ": digitize:quantisation \"" + q.substr(0, 60) + "\" is malformed"};
+      return Error{file + ": digitize:quantisation \"" + EscapeForTerminal(q.substr(0, 60)) + "\" is malformed"};
     s.quantisation = {hb, nb, rb, lb};
     if (Status st = s.quantisation.Validate(); !st.ok())
       return Error{file + ": digitize:quantisation: " + st.message()};
   } else {
-    return Error{file + ": digitize:encoding \"" + encoding.substr(0, 40) +
+    return Error{file + ": digitize:encoding \"" + EscapeForTerminal(encoding.substr(0, 40)) +
                  "\" is neither half nor quantised"};
   }
   s.gauge = spec.get_string_attribute("digitize:gauge");
   if (s.gauge.rfind("lafortune1", 0) != 0)
-    return Error{file + ": digitize:gauge \"" + s.gauge.substr(0, 40) +
+    return Error{file + ": digitize:gauge \"" + EscapeForTerminal(s.gauge.substr(0, 40)) +
                  "\" is not the one-lobe Lafortune gauge this reader knows"};
   auto prov = ParseProvenance(file, spec.get_string_attribute("digitize:provenance"));
   if (!prov.ok()) return prov.error();
@@ -449,6 +507,12 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   auto transform = ParseTransform(file, spec.get_string_attribute("digitize:canvas_from_scan"));
   if (!transform.ok()) return transform.error();
   h.canvas_from_scan = *transform;
+  if (Status st = CheckPhysicalBounds(s.pitch_mm, s.width, s.height, s.delta0_mm, s.max_height_mm,
+                                      h.canvas_from_scan);
+      !st.ok())
+    return Error{file + ": digitize:" + st.message()};
+  if (Status st = CheckSizeMm(file, spec.get_string_attribute("digitize:size_mm"), s); !st.ok())
+    return Error{st.message()};
 
   h.cells_x = (s.width + s.cell_px - 1) / s.cell_px;
   h.cells_y = (s.height + s.cell_px - 1) / s.cell_px;
@@ -516,31 +580,29 @@ Status PackWriteOptions::Validate() const { return quantisation.Validate(); }
 Status Pack::Validate() const {
   const int w = width(), h = height();
   if (w <= 0 || h <= 0) return Error{"pack: empty grid"};
-  if (!(std::isfinite(field.pitch_mm) && field.pitch_mm > 0))
-    return Error{"pack: pitch_mm must be > 0, got " + FormatNumber(field.pitch_mm)};
+  if (Status s = CheckPhysicalBounds(field.pitch_mm, w, h, delta0_mm, max_height_mm,
+                                     canvas_from_scan);
+      !s.ok())
+    return Error{"pack: " + s.message()};
   if (field.state.width != w || field.state.height != h || normals.width != w ||
       normals.height != h || maps.width() != w || maps.height() != h)
     return Error{"pack: the height field, normals and reflectance maps differ in size"};
   if (Status s = maps.Validate(); !s.ok()) return Error{"pack: " + s.message()};
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
-      if (!std::isfinite(field.height_mm(x, y)))
-        return Error{"pack: height at texel " + TexelName(x, y) + " is not finite"};
+      if (!(std::abs(field.height_mm(x, y)) <= kMaxPackHeightMm))
+        return Error{"pack: height at texel " + TexelName(x, y) + " = " +
+                     FormatNumber(field.height_mm(x, y)) + " mm is not finite or beyond " +
+                     Num(kMaxPackHeightMm) + " mm"};
       if (static_cast<int>(field.state(x, y)) > 3)
         return Error{"pack: texel state at " + TexelName(x, y) + " is not a TexelState"};
       const Vec3f& n = normals(x, y);
       if (!IsValid(n) || std::abs(n.norm() - 1.0f) > 1e-3f || n.z() < 0)
         return Error{"pack: normal at texel " + TexelName(x, y) + " is not a unit vector with nz >= 0"};
     }
-  if (!(std::isfinite(delta0_mm) && std::isfinite(max_height_mm) && delta0_mm >= 0 &&
-        delta0_mm <= max_height_mm + 1e-9) && !(delta0_mm == 0 && std::isfinite(max_height_mm)))
-    return Error{"pack: delta0_mm " + FormatNumber(delta0_mm) + " must be in [0, max_height_mm " +
-                 FormatNumber(max_height_mm) + "]"};
   if (cell_px < 1) return Error{"pack: cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!boxes.empty() && !(delta0_mm > 0))
     return Error{"pack: boxes need a bump plane above the canvas (delta0_mm > 0)"};
-  if (!canvas_from_scan.rotation.allFinite() || !canvas_from_scan.translation.allFinite())
-    return Error{"pack: canvas_from_scan is not finite"};
   for (size_t i = 0; i < boxes.size(); ++i) {
     const ReliefBox& b = boxes[i];
     const std::string name = "pack: box " + std::to_string(i);
@@ -552,7 +614,8 @@ Status Pack::Validate() const {
       return Error{name + " is not a cell of the " + std::to_string(cell_px) + "-texel grid"};
     if (b.u_max < b.x0 || b.u_max >= b.x0 + b.width || b.v_max < b.y0 || b.v_max >= b.y0 + b.height)
       return Error{name + ": its highest texel (u_max, v_max) lies outside the box"};
-    if (!std::isfinite(b.h_max_mm) || b.h_max_mm > max_height_mm + 1e-6 * (1 + std::abs(max_height_mm)))
+    if (!(b.h_max_mm >= -kMaxPackHeightMm) ||
+        b.h_max_mm > max_height_mm + 1e-6 * (1 + std::abs(max_height_mm)))
       return Error{name + ": h_max_mm " + FormatNumber(b.h_max_mm) + " is not finite or above H"};
     if (i > 0) {
       const ReliefBox& a = boxes[i - 1];
@@ -664,7 +727,10 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   meta.attribute("digitize:cell_px", std::to_string(pack.cell_px));
   meta.attribute("digitize:box_count", std::to_string(pack.boxes.size()));
   meta.attribute("digitize:canvas_from_scan", TransformJson(pack.canvas_from_scan).dump());
-  meta.attribute("digitize:provenance", ProvenanceJson(pack.provenance).dump());
+  // File names are bytes, not always UTF-8 (a capture machine's Latin-1 names): replaced, not
+  // thrown on.
+  meta.attribute("digitize:provenance",
+                 ProvenanceJson(pack.provenance).dump(-1, ' ', false, json::error_handler_t::replace));
   const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
   const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
   meta.attribute("digitize:checksum", PackChecksum(meta, data, data_bytes));
@@ -791,7 +857,9 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     const float height = FromHalfBits(sp[0]);
     const float nx = FromHalfBits(sp[1]), ny = FromHalfBits(sp[2]);
     const float code = FromHalfBits(sp[3]);
-    if (!std::isfinite(height)) return bad(i, "height is not finite");
+    if (!(std::abs(height) <= kMaxPackHeightMm))
+      return bad(i, "height " + FormatNumber(height) + " mm is not finite or beyond " +
+                        Num(kMaxPackHeightMm) + " mm");
     if (!(std::abs(nx) <= 1.001f && std::abs(ny) <= 1.001f && nx * nx + ny * ny <= 1.002f))
       return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) + ") is not a unit normal's x, y");
     if (!(code >= 0 && code < 4 * kTexelFitStatusCount && code == std::floor(code)))
@@ -830,7 +898,9 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
             dv == std::floor(dv)))
         return Error{cell + ": highest texel offset (" + FormatNumber(du) + ", " + FormatNumber(dv) +
                      ") is not a texel of the cell"};
-      if (!std::isfinite(hmax)) return Error{cell + ": h_max is not finite"};
+      if (!(std::abs(hmax) <= kMaxPackHeightMm))
+        return Error{cell + ": h_max " + FormatNumber(hmax) + " mm is not finite or beyond " +
+                     Num(kMaxPackHeightMm) + " mm"};
       b.h_max_mm = hmax;
       b.u_max = b.x0 + static_cast<int>(du);
       b.v_max = b.y0 + static_cast<int>(dv);
@@ -854,6 +924,11 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   const Pack& p = *pack;
   v.checks.push_back("container: OpenEXR, 3 parts, version " + std::to_string(v.summary.version) +
                      ", " + ToString(v.summary.encoding) + " encoding");
+  v.checks.push_back("geometry: pitch " + Num(p.field.pitch_mm) + " mm, " + Num(p.width_mm()) +
+                     " x " + Num(p.height_mm()) + " mm (as digitize:size_mm, within " +
+                     Num(kMaxPackExtentMm / 1000) + " m), heights, H and delta0 within " +
+                     Num(kMaxPackHeightMm) + " mm, canvas_from_scan a rotation within " +
+                     Num(kMaxPackTranslationMm / 1000) + " m");
   v.checks.push_back("values: " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");
@@ -890,7 +965,7 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   v.checks.push_back("heights: all <= max_height_mm " + FormatNumber(p.max_height_mm) + " mm");
   if (v.summary.provenance.tool_version.empty())
     return Error{file + ": provenance has no tool_version"};
-  v.checks.push_back("provenance: " + v.summary.provenance.tool_version + ", " +
+  v.checks.push_back("provenance: " + EscapeForTerminal(v.summary.provenance.tool_version) + ", " +
                      std::to_string(v.summary.provenance.inputs.size()) + " inputs");
   return v;
 }
@@ -924,12 +999,28 @@ PackProvenance NewProvenance() {
   return p;
 }
 
-Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<fs::path>& files) {
+namespace {
+
+// The name provenance records for `file` (AddProvenanceInputs).
+std::string ProvenanceName(const fs::path& file, const fs::path& relative_to) {
+  if (relative_to.empty()) return (file.is_absolute() ? file.filename() : file).generic_string();
+  std::error_code ec;
+  const fs::path a = fs::absolute(file, ec).lexically_normal();
+  const fs::path b = fs::absolute(relative_to, ec).lexically_normal();
+  const fs::path rel = a.lexically_relative(b);
+  return (rel.empty() ? file.filename() : rel).generic_string();
+}
+
+}  // namespace
+
+Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<fs::path>& files,
+                           const fs::path& relative_to) {
   for (const fs::path& f : files) {
     auto sha = FileSha1(f);
     if (!sha.ok()) return sha.error();
     std::error_code ec;
-    provenance.inputs.push_back({f.string(), *sha, static_cast<uint64_t>(fs::file_size(f, ec))});
+    provenance.inputs.push_back(
+        {ProvenanceName(f, relative_to), *sha, static_cast<uint64_t>(fs::file_size(f, ec))});
   }
   return Status::Ok();
 }
@@ -964,12 +1055,14 @@ Result<PackProvenance> ProvenanceFromOutputs(const fs::path& canvas_dir, const f
     const json doc = json::parse(text.str(), nullptr, false);
     if (doc.is_discarded() || !doc.is_object())
       return Error{(dir / "report.json").string() + ": not JSON"};
-    json entry = {{"options", doc.value("options", json::object())},
-                  {"inputs", doc.value("inputs", json::array())}};
+    json inputs = doc.value("inputs", json::array());
+    for (json& in : inputs)
+      if (in.is_string()) in = ProvenanceName(in.get<std::string>(), {});
+    json entry = {{"options", doc.value("options", json::object())}, {"inputs", inputs}};
     options[stage] = entry;
     if (std::string(stage) == "fit") p.fit_brief = doc.value("brief", "");
   }
-  p.options_json = options.dump();
+  p.options_json = options.dump(-1, ' ', false, json::error_handler_t::replace);
   return p;
 }
 

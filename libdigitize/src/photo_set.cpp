@@ -674,6 +674,21 @@ fs::path ResolveLpImage(const fs::path& dir, std::string name) {
   return direct;
 }
 
+// PhotoSetOptions::allow_outside_paths: `image` (what `entry` of the file in `dir` names, as
+// `written`) must resolve, symbolic links and ".." included, to a path inside dir's.
+Status CheckImageInsideFolder(const fs::path& image, const fs::path& dir, const std::string& entry,
+                              const std::string& written, const PhotoSetOptions& options) {
+  if (options.allow_outside_paths) return Status::Ok();
+  std::error_code ec;
+  const fs::path base = fs::weakly_canonical(fs::absolute(dir.empty() ? fs::path(".") : dir, ec), ec);
+  const fs::path resolved = fs::weakly_canonical(fs::absolute(image, ec), ec);
+  const fs::path rel = resolved.lexically_relative(base);
+  if (!ec && !rel.empty() && *rel.begin() != ".." && rel != ".") return Status::Ok();
+  return Error{entry + ": image \"" + written + "\" lies outside the capture folder " +
+               base.string() + " (it resolves to " + resolved.string() +
+               "); refused unless allowed (--allow-outside-paths)"};
+}
+
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -955,6 +970,12 @@ Result<PhotoSet> ReadCalibration(const fs::path& json_path, const PhotoSetOption
   auto parsed = ParseCalibrationText(*text, json_path);
   if (!parsed) return parsed.error();
   PhotoSet set = std::move(*parsed);
+  for (const Photo& photo : set.photos) {
+    if (Status s = CheckImageInsideFolder(photo.path, json_path.parent_path(), photo.entry,
+                                          photo.path.string(), options);
+        !s)
+      return Error{s.message()};
+  }
   if (Status s = ProbeAll(set); !s) return Error{s.message()};
   if (options.load_pixels) {
     if (Status s = LoadPhotoPixels(set, options, progress); !s) return Error{s.message()};
@@ -981,6 +1002,8 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
     Photo photo;
     photo.entry = lp_path.string() + ", line " + std::to_string(e.line);
     photo.path = ResolveLpImage(dir, e.image);
+    if (Status s = CheckImageInsideFolder(photo.path, dir, photo.entry, e.image, options); !s)
+      return Error{s.message()};
     auto header = ReadHeader(photo.path);
     if (!header) return Error{photo.entry + ": " + header.error().message};
     if (width == 0) {

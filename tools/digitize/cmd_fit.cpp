@@ -143,6 +143,10 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()->group("Photos");
   c->add_option("--rti-pitch-mm", args->photo.rti_pixel_pitch_mm,
                 "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+  c->add_flag("--allow-outside-paths", args->photo.allow_outside_paths,
+              "Read images the calibration / .lp names outside its folder (.., absolute paths, "
+              "symbolic links); refused by default: a shared capture must not open other files")
+      ->group("Photos");
   c->add_option("--tile-texels", args->options.tile_texels,
                 "Texels sampled and fitted at a time (memory: ~ tile x photos x 48 bytes)")
       ->capture_default_str()->group("Performance");

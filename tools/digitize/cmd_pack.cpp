@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "digitize/image_io.h"
 #include "digitize/pack.h"
 #include "digitize/reflectance_fit.h"
 
@@ -21,7 +22,8 @@ std::string PackOptionsJson(const PackWriteOptions& o) {
 
 void PrintPackSummaryLine(const std::string& path, const PackSummary& s) {
   std::printf("%s: %dx%d texels (%.1f x %.1f mm), %zu boxes, %s, %.2f bytes/texel (%llu bytes)\n",
-              path.c_str(), s.width, s.height, s.width * s.pitch_mm, s.height * s.pitch_mm,
+              EscapeForTerminal(path).c_str(), s.width, s.height, s.width * s.pitch_mm,
+              s.height * s.pitch_mm,
               s.box_count, ToString(s.encoding), s.BytesPerTexel(),
               static_cast<unsigned long long>(s.file_bytes));
 }
@@ -142,7 +144,11 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
                               {"normal", s->quantisation.normal_bits},
                               {"rho", s->quantisation.rho_bits},
                               {"lobe", s->quantisation.lobe_bits}};
-      std::printf("%s\n", j.dump(2).c_str());
+      // ASCII only (\uXXXX for the rest, so no control character reaches the terminal), and
+      // bytes that are not UTF-8 (a file name) replaced rather than thrown on.
+      std::printf("%s\n",
+                  j.dump(2, ' ', /*ensure_ascii=*/true, nlohmann::json::error_handler_t::replace)
+                      .c_str());
     } else {
       PrintPackSummaryLine(args->pack, *s);
       std::printf("  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",
@@ -154,12 +160,16 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
       std::printf("  pitch       %.4g mm\n", s->pitch_mm);
       std::printf("  relief      delta0 %.4g mm, H %.4g mm, %zu boxes of %d texels\n", s->delta0_mm,
                   s->max_height_mm, s->box_count, s->cell_px);
-      std::printf("  fit         %s\n", p.fit_brief.empty() ? "(none recorded)" : p.fit_brief.c_str());
-      std::printf("  made by     %s on %s\n", p.tool_version.c_str(), p.created_utc.c_str());
+      // Every string from the file is escaped: a pack is shared, and its provenance could
+      // otherwise clear the screen, retitle the terminal or forge lines of this listing.
+      std::printf("  fit         %s\n",
+                  p.fit_brief.empty() ? "(none recorded)" : EscapeForTerminal(p.fit_brief).c_str());
+      std::printf("  made by     %s on %s\n", EscapeForTerminal(p.tool_version).c_str(),
+                  EscapeForTerminal(p.created_utc).c_str());
       std::printf("  inputs      %zu files\n", p.inputs.size());
       for (const PackInput& in : p.inputs)
-        std::printf("    %-28s %10llu bytes  sha1 %s\n", in.name.c_str(),
-                    static_cast<unsigned long long>(in.bytes), in.sha1.c_str());
+        std::printf("    %-28s %10llu bytes  sha1 %s\n", EscapeForTerminal(in.name).c_str(),
+                    static_cast<unsigned long long>(in.bytes), EscapeForTerminal(in.sha1).c_str());
     }
     exit_code = 0;
   });
@@ -178,7 +188,7 @@ void AddVerifyCommand(CLI::App& app, int& exit_code) {
       return;
     }
     for (const std::string& line : v->checks) std::printf("ok  %s\n", line.c_str());
-    std::printf("%s: valid\n", path->c_str());
+    std::printf("%s: valid\n", EscapeForTerminal(*path).c_str());
     exit_code = 0;
   });
 }

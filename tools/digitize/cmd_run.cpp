@@ -91,7 +91,11 @@ int Run(RunArgs args) {
   std::vector<std::filesystem::path> files(args.preprocess.scans.begin(), args.preprocess.scans.end());
   files.emplace_back(fa.photos);
   for (const Photo& p : set->photos) files.push_back(p.path);
-  if (Status s = AddProvenanceInputs(provenance, files); !s.ok()) return Fail(cmd, s.message());
+  // Named relative to the calibration file, as its image paths are: not where they lay here.
+  if (Status s = AddProvenanceInputs(provenance, files,
+                                     std::filesystem::absolute(fa.photos).parent_path());
+      !s.ok())
+    return Fail(cmd, s.message());
   provenance.fit_brief = fit->report.Brief();
   nlohmann::json options = {
       {"preprocess", nlohmann::json::parse(preprocess_options, nullptr, false)},
@@ -181,6 +185,10 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
           ->capture_default_str()->group("Fit");
   c->add_option("--rti-pitch-mm", args->fit.photo.rti_pixel_pitch_mm,
                 "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+  c->add_flag("--allow-outside-paths", args->fit.photo.allow_outside_paths,
+              "Read images the calibration / .lp names outside its folder (.., absolute paths, "
+              "symbolic links); refused by default: a shared capture must not open other files")
+      ->group("Photos");
   c->add_option("--threads", args->fit.threads, "Worker threads (0 = all cores)")
       ->capture_default_str()->group("Performance");
   AddPackWriteFlags(c, args->pack, args->quantised);

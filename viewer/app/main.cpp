@@ -28,6 +28,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "digitize_viewer/gallery.h"
+#include "digitize_viewer/painting_setup.h"
 #include "digitize_viewer/renderer.h"
 
 using namespace digitize;
@@ -74,13 +75,17 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     std::fprintf(stderr, "digitize-viewer: %s\n", renderer.error().message.c_str());
     return 1;
   }
-  std::vector<Eigen::Vector2d> sizes;
-  for (const auto& p : packs) sizes.emplace_back(p.second.width_mm(), p.second.height_mm());
-  Gallery g = MakeGallery(sizes);
-  for (size_t i = 0; i < packs.size(); ++i) {
-    auto added = (*renderer)->AddPainting(packs[i].second, packs[i].first, g.world_from_canvas[i]);
-    if (!added) errors.push_back(added.error().message);
+  // A pack the viewer refuses is listed (stderr and the panel); the others hang without a gap.
+  GalleryScene scene = HangPaintings(packs);
+  Gallery& g = scene.gallery;
+  std::vector<std::string> refused = scene.failed;
+  for (size_t k = 0; k < scene.hung.size(); ++k) {
+    const auto& [name, pack] = packs[scene.hung[k]];
+    auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
+    if (!added) refused.push_back(added.error().message);
   }
+  for (const std::string& e : refused) std::fprintf(stderr, "digitize-viewer: %s\n", e.c_str());
+  errors.insert(errors.end(), refused.begin(), refused.end());
   (*renderer)->SetSceneBoxes(g.boxes);
   Walker walker;
   walker.eye = g.start.eye_mm;
@@ -299,12 +304,15 @@ int main(int argc, char** argv) {
       }
       path = *p;
     }
-    if (Status s = RenderGalleryScreenshots(packs, screenshot, path, shot); !s.ok()) {
+    const size_t loaded = errors.size();
+    if (Status s = RenderGalleryScreenshots(packs, screenshot, path, shot, &errors); !s.ok()) {
       std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
       return 1;
     }
+    for (size_t i = loaded; i < errors.size(); ++i)
+      std::fprintf(stderr, "digitize-viewer: %s\n", errors[i].c_str());
     std::printf("wrote %s (%zu painting(s), %zu failed to load)\n", screenshot.c_str(),
-                packs.size(), errors.size());
+                packs.size() - (errors.size() - loaded), errors.size());
     return errors.empty() ? 0 : 1;
   }
   return RunWindow(packs, errors, options, window_frames, window_shot);

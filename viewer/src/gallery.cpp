@@ -7,84 +7,11 @@
 
 #include "digitize/image_io.h"
 #include "digitize_viewer/gl_context.h"
+#include "digitize_viewer/painting_setup.h"
 
 namespace digitize::viewer {
-namespace {
-constexpr double kPi = 3.14159265358979323846;
-}
 
-Status GalleryOptions::Validate() const {
-  for (double v : {min_room_width_mm, room_depth_mm, room_height_mm, centre_height_mm, gap_mm,
-                   frame_mm, light_distance_mm})
-    if (!(v > 0 && std::isfinite(v))) return Error{"gallery: every length must be > 0"};
-  return Status::Ok();
-}
-
-Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryOptions& o) {
-  const Status valid = o.Validate();
-  DIGITIZE_CHECK(valid.ok(), valid.message());
-  Gallery g;
-  double total = o.gap_mm;
-  for (const auto& s : sizes_mm) total += s.x() + 2 * o.frame_mm + o.gap_mm;
-  g.width_mm = std::max(o.min_room_width_mm, total);
-  g.depth_mm = o.room_depth_mm;
-  g.height_mm = o.room_height_mm;
-  const double W = g.width_mm, D = g.depth_mm, H = g.height_mm, t = 100;  // wall thickness
-  // Darkish walls as in museums: the paintings, lit to paper white, stand out.
-  const Vec3f wall(0.28f, 0.30f, 0.34f), floor(0.30f, 0.22f, 0.16f), ceiling(0.6f, 0.6f, 0.6f);
-  g.boxes = {
-      {Vec3d(-t, -t, -t), Vec3d(W + t, D + t, 0), floor},
-      {Vec3d(-t, -t, H), Vec3d(W + t, D + t, H + t), ceiling},
-      {Vec3d(-t, D, 0), Vec3d(W + t, D + t, H), wall},  // back wall
-      {Vec3d(-t, -t, 0), Vec3d(W + t, 0, H), wall},     // front wall (behind the start)
-      {Vec3d(-t, 0, 0), Vec3d(0, D, H), wall},          // left
-      {Vec3d(W, 0, 0), Vec3d(W + t, D, H), wall},       // right
-  };
-  // Canvas X -> world X, canvas Y -> world Z, canvas Z -> world -Y.
-  Mat3d r;
-  r << 1, 0, 0, 0, 0, -1, 0, 1, 0;
-  double x = (W - (total - o.gap_mm)) / 2 + o.gap_mm / 2;  // centre the row
-  const double wall_y = D - 2;                             // canvases 2 mm in front of the wall
-  const Vec3f gold(0.55f, 0.42f, 0.2f);
-  for (const auto& s : sizes_mm) {
-    const double x0 = x + o.frame_mm, z0 = o.centre_height_mm - s.y() / 2;
-    RigidTransform t_wc;
-    t_wc.rotation = r;
-    t_wc.translation = Vec3d(x0, wall_y, z0);
-    g.world_from_canvas.push_back(t_wc);
-    const double f = o.frame_mm, depth = 40;
-    const double x1 = x0 + s.x(), z1 = z0 + s.y(), y0 = wall_y - depth;
-    g.boxes.push_back({Vec3d(x0 - f, y0, z0 - f), Vec3d(x1 + f, wall_y, z0), gold});  // bottom
-    g.boxes.push_back({Vec3d(x0 - f, y0, z1), Vec3d(x1 + f, wall_y, z1 + f), gold});  // top
-    g.boxes.push_back({Vec3d(x0 - f, y0, z0), Vec3d(x0, wall_y, z1), gold});          // left
-    g.boxes.push_back({Vec3d(x1, y0, z0), Vec3d(x1 + f, wall_y, z1), gold});          // right
-    const Vec3d centre(x0 + s.x() / 2, wall_y, o.centre_height_mm);
-    Light light;
-    light.type = LightType::kPoint;
-    const double a = 30 * kPi / 180;
-    light.position_mm = centre + o.light_distance_mm * Vec3d(0, -std::cos(a), std::sin(a));
-    // White Lambertian at the centre reads 1: I cos(theta) / (pi d^2) = 1.
-    const double d = o.light_distance_mm;
-    light.intensity = Vec3f::Constant(float(kPi * d * d / std::cos(a)));
-    g.lights.push_back(light);
-    x += s.x() + 2 * o.frame_mm + o.gap_mm;
-  }
-  g.start.eye_mm = Vec3d(W / 2, std::max(600.0, D - 2200), 1600);
-  g.start.target_mm = Vec3d(W / 2, D, o.centre_height_mm);
-  g.start.up = Vec3d::UnitZ();
-  g.start.fov_y_deg = 45;
-  g.start.near_mm = 10;
-  g.start.far_mm = 4 * (W + D + H);
-  return g;
-}
-
-Result<Pack> LoadPackForViewer(const std::filesystem::path& path) {
-#if DIGITIZE_VIEWER_HAVE_READ_PACK
-  return ReadPack(path);
-#else
-  return Error{path.string() + ": this build has no pack reader (libdigitize/src/pack.cpp)"};
-#endif
-}
+// MakeGallery and LoadPackForViewer: gallery_layout.cpp (no GL, so the fuzz target links them).
 
 Result<std::vector<ViewCamera>> ReadCameraPath(const std::filesystem::path& path) {
   const std::string name = path.string();
@@ -137,17 +64,23 @@ Result<std::vector<ViewCamera>> ReadCameraPath(const std::filesystem::path& path
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path,
-                                const GalleryShotOptions& options) {
+                                const GalleryShotOptions& options,
+                                std::vector<std::string>* failed) {
   auto context = HeadlessContext::Create();
   if (!context) return context.error();
   auto renderer = Renderer::Create();
   if (!renderer) return renderer.error();
-  std::vector<Eigen::Vector2d> sizes;
-  for (const auto& p : packs) sizes.emplace_back(p.second.width_mm(), p.second.height_mm());
-  const Gallery g = MakeGallery(sizes);
-  for (size_t i = 0; i < packs.size(); ++i) {
-    auto added = (*renderer)->AddPainting(packs[i].second, packs[i].first, g.world_from_canvas[i]);
-    if (!added) return added.error();
+  const GalleryScene scene = HangPaintings(packs);
+  const Gallery& g = scene.gallery;
+  std::vector<std::string> refused = scene.failed;
+  for (size_t k = 0; k < scene.hung.size(); ++k) {
+    const auto& [name, pack] = packs[scene.hung[k]];
+    auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
+    if (!added) refused.push_back(added.error().message);
+  }
+  if (!refused.empty()) {
+    if (failed == nullptr) return Error{refused.front()};
+    failed->insert(failed->end(), refused.begin(), refused.end());
   }
   (*renderer)->SetSceneBoxes(g.boxes);
   std::vector<ViewCamera> cameras = path;
@@ -157,6 +90,9 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     c.height = options.height;
     cameras.push_back(c);
   }
+  // Before anything is drawn: an image this GL cannot hold is an error, not an abort.
+  for (const ViewCamera& c : cameras)
+    if (Status s = (*renderer)->CheckImageSize(c.width, c.height); !s.ok()) return s;
   for (size_t i = 0; i < cameras.size(); ++i) {
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, options.render);
     std::filesystem::path out = out_png;

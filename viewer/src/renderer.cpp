@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "digitize_viewer/painting_setup.h"
 #include "height_mesh.h"
 #include "shaders.h"
 
@@ -347,19 +348,32 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
 
 int Renderer::painting_count() const { return int(impl_->paintings.size()); }
 
+Status Renderer::CheckImageSize(int width, int height) const {
+  const std::string image = "a " + Size(width, height) + " image";
+  if (width < 1 || height < 1) return Error{image + " has no pixels"};
+  GLint renderbuffer = 0, texture = 0, viewport[2] = {0, 0};
+  glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &renderbuffer);
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &texture);
+  glGetIntegerv(GL_MAX_VIEWPORT_DIMS, viewport);
+  const int limit = std::min({renderbuffer, texture, viewport[0], viewport[1]});
+  if (width > limit || height > limit)
+    return Error{image + " is larger than this OpenGL's maximum render target size " +
+                 std::to_string(limit) + " (GL_MAX_RENDERBUFFER_SIZE " + std::to_string(renderbuffer) +
+                 ", GL_MAX_TEXTURE_SIZE " + std::to_string(texture) + ", GL_MAX_VIEWPORT_DIMS " +
+                 std::to_string(viewport[0]) + "x" + std::to_string(viewport[1]) + ")"};
+  if (int64_t{width} * height > kMaxRenderPixels)
+    return Error{image + " has more than the " + std::to_string(kMaxRenderPixels) +
+                 " pixels (8192 x 8192) the viewer renders at once"};
+  return Status::Ok();
+}
+
 Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
                                   const RigidTransform& world_from_canvas,
                                   const MeshOptions& mesh) {
+  auto setup = PreparePainting(pack, name);
+  if (!setup) return setup.error();
   const int w = pack.width(), h = pack.height();
   auto fail = [&](const std::string& what) { return Error{name + ": " + what}; };
-  if (w < 2 || h < 2) return fail("the pack has " + Size(w, h) + " texels; at least 2x2 needed");
-  if (pack.field.state.width != w || pack.field.state.height != h || pack.normals.width != w ||
-      pack.normals.height != h || pack.maps.rho_d.width != w || pack.maps.rho_d.height != h ||
-      pack.maps.rho_s.width != w || pack.maps.rho_s.height != h || pack.maps.lobe.width != w ||
-      pack.maps.lobe.height != h)
-    return fail("maps differ in size from the " + Size(w, h) + " height field");
-  if (!(pack.field.pitch_mm > 0) || !std::isfinite(pack.field.pitch_mm))
-    return fail("pitch_mm must be > 0, got " + FormatNumber(pack.field.pitch_mm));
   GLint max_size = 0;
   glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_size);
   if (w > max_size || h > max_size)
@@ -370,23 +384,19 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
   p.world_from_canvas = world_from_canvas;
   p.texels_w = w;
   p.texels_h = h;
-  p.pitch_mm = pack.field.pitch_mm;
-  p.width_mm = pack.width_mm();
-  p.height_mm = pack.height_mm();
-  p.delta0_mm = pack.delta0_mm;
-  p.max_height_mm = pack.max_height_mm;
-  p.boxes = pack.boxes;
+  p.pitch_mm = setup->pitch_mm;
+  p.width_mm = setup->width_mm;
+  p.height_mm = setup->height_mm;
+  p.delta0_mm = setup->delta0_mm;
+  p.min_height_mm = setup->min_height_mm;
+  p.max_height_mm = setup->max_height_mm;
+  p.boxes = std::move(setup->boxes);
+  p.box_top = std::move(setup->box_tops);
   const size_t n = size_t(w) * h;
   std::vector<float> surface(4 * n), rho_d(4 * n), rho_s(4 * n), lobe(4 * n);
-  float min_h = std::numeric_limits<float>::infinity(), max_h = -min_h;
   for (size_t i = 0; i < n; ++i) {
     const float hh = pack.field.height_mm.data[i];
     const Vec3f& nn = pack.normals.data[i];
-    if (!std::isfinite(hh) || !nn.allFinite())
-      return fail("non-finite height or normal at texel " + std::to_string(i % w) + ", " +
-                  std::to_string(i / w));
-    min_h = std::min(min_h, hh);
-    max_h = std::max(max_h, hh);
     const bool inside = pack.field.state.data[i] != TexelState::kOutside;
     const Vec3f& d = pack.maps.rho_d.data[i];
     const Vec3f& s = pack.maps.rho_s.data[i];
@@ -399,16 +409,6 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
     surface[4 * i + 3] = hh;
     rho_d[4 * i + 3] = inside ? 1.0f : 0.0f;
     for (int k = 0; k < 4; ++k) lobe[4 * i + k] = c[k];
-  }
-  p.min_height_mm = min_h;
-  // A pack whose H is below its highest texel would let the relief poke out of the boxes.
-  p.max_height_mm = std::max<double>(p.max_height_mm, max_h);
-  for (const ReliefBox& b : p.boxes) {
-    if (b.x0 < 0 || b.y0 < 0 || b.width <= 0 || b.height <= 0 || b.x0 + b.width > w ||
-        b.y0 + b.height > h)
-      return fail("a relief box lies outside the " + Size(w, h) + " grid");
-    const Eigen::Vector2d xy = pack.field.TexelCentreMm(b.u_max, b.v_max);
-    p.box_top.emplace_back(xy.x(), xy.y(), b.h_max_mm);
   }
   p.textures[0] = MakeTexture(w, h, surface, true);
   p.textures[1] = MakeTexture(w, h, rho_d, false);
@@ -666,6 +666,8 @@ RenderedImage Renderer::Render(const ViewCamera& camera, const std::vector<Light
   DIGITIZE_CHECK(valid_camera.ok(), "Renderer::Render: " + valid_camera.message());
   const Status valid = options.Validate();
   DIGITIZE_CHECK(valid.ok(), "Renderer::Render: " + valid.message());
+  const Status fits = CheckImageSize(camera.width, camera.height);
+  DIGITIZE_CHECK(fits.ok(), "Renderer::Render: " + fits.message());
   Impl& m = *impl_;
   m.EnsureTarget(camera.width, camera.height);
   glBindFramebuffer(GL_FRAMEBUFFER, m.fbo);

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <string_view>
 
 #include "digitize/core.h"
 
@@ -24,6 +25,14 @@ Status WriteTextFile(const std::filesystem::path& path, const std::string& text)
 // A library's multi-line error text as one line ("; " between lines, no trailing newline), so
 // every message the toolkit prints stays one line.
 std::string OneLine(std::string text);
+
+// Text from a file (a pack's provenance, a shared capture's names) made safe to print on a
+// terminal: C0 controls (newline and ESC included), DEL and the C1 controls (U+0080-U+009F, and
+// raw bytes 0x80-0x9F, which some terminals read as CSI) become \n, \r, \t or \xNN / \u{NNNN};
+// Unicode line separators and bidirectional overrides (which reorder what is shown) become
+// \u{NNNN}; bytes that are not UTF-8 become \xNN; a backslash becomes \\, so an escaped text
+// cannot pose as another. Printable UTF-8 is kept as it is. One line out, always.
+std::string EscapeForTerminal(std::string_view text);
 
 // String metadata stored in the image header (EXR attributes), e.g. {"digitize:units", "mm"}.
 using ImageMetadata = std::map<std::string, std::string>;

@@ -37,6 +37,20 @@ namespace digitize {
 inline constexpr int kPackVersion = 1;
 inline constexpr const char* kPackFormatName = "digitize.pack";
 
+// Physical bounds on what a pack may state (docs/formats.md, "What the reader checks"). A pack is
+// shared between institutions, so its header is untrusted input: a pitch of 1e308 mm survives
+// every finiteness check and then makes the gallery infinitely wide. Pack::Validate, the writer,
+// ReadPack, InspectPack and VerifyPack all refuse a pack outside these bounds.
+inline constexpr double kMinPackPitchMm = 1e-3;       // 1 um: finer than any scanner
+inline constexpr double kMaxPackExtentMm = 100000.0;  // pitch x texels on either side: 100 m
+inline constexpr double kMaxPackHeightMm = 1000.0;    // |height|, |h_max|, |H| and delta0: 1 m
+inline constexpr double kMaxPackTranslationMm = 100000.0;  // |canvas_from_scan translation|
+// |R R^T - I| (Frobenius) and det R > 0 of canvas_from_scan: 6-decimal JSON stays well inside.
+inline constexpr double kPackRotationTolerance = 1e-4;
+// digitize:size_mm against pitch x texels, relative (the writer stores both in shortest
+// round-trip form, so a pack it wrote agrees exactly).
+inline constexpr double kPackSizeTolerance = 1e-9;
+
 struct PackInput {
   std::string name;    // file name as given on the command line
   std::string sha1;    // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
@@ -69,7 +83,9 @@ struct Pack {
   double height_mm() const { return field.height() * field.pitch_mm; }
   // Everything consistent: sizes, finite values, rho >= 0, cz = 1, k >= 0, normals unit with
   // nz > 0, boxes inside the grid with h_max in [delta0, H] and (u_max, v_max) inside the box,
-  // delta0 <= H. Message names the map and texel (or box index).
+  // delta0 <= H; and physically plausible (the kMinPackPitchMm ... bounds above: pitch, extent,
+  // heights, H, delta0, canvas_from_scan a rotation with a bounded translation). Message names
+  // the map and texel (or box index, or the value).
   Status Validate() const;
 };
 
@@ -154,13 +170,19 @@ Result<PackVerification> VerifyPack(const std::filesystem::path& path,
 // Tool version and the time now (UTC, ISO 8601); the rest empty.
 PackProvenance NewProvenance();
 
-// Appends each file with its SHA-1 and size (name as given). Error names the file.
-Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<std::filesystem::path>& files);
+// Appends each file with its SHA-1 and size. Names: relative to the folder `relative_to` (e.g.
+// the calibration file's: "images/img_000.png", "../scans/scan.exr"), never an absolute path of
+// the capturing machine (a pack is shared; its provenance should not tell where the files lay);
+// with relative_to empty, a relative name as given and an absolute one as its file name.
+// Error names the file.
+Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<std::filesystem::path>& files,
+                           const std::filesystem::path& relative_to = {});
 
 // Provenance of a pack made from a `digitize preprocess` folder and a `digitize fit` folder (either
 // may be empty: an RTI capture has no canvas folder): every file of both hashed (named
 // "<folder>/<file>"), the fit's brief, both stages' options and their own inputs (their
-// report.json), `pack_options` (a JSON object), the tool version and the time now (UTC).
+// report.json; absolute paths there reduced to their file names, as AddProvenanceInputs),
+// `pack_options` (a JSON object), the tool version and the time now (UTC).
 Result<PackProvenance> ProvenanceFromOutputs(const std::filesystem::path& canvas_dir,
                                              const std::filesystem::path& fit_dir,
                                              const std::string& pack_options_json);

@@ -216,6 +216,10 @@ struct PhotoSetOptions {
   // RTI only (ReadRtiCapture).
   double rti_pixel_pitch_mm = 1.0;  // canvas mm per image pixel (RTI has no scale; 1 = pixels)
   double rti_camera_distance_mm = 1000.0;  // nominal height of the orthographic camera
+  // Image paths of a calibration or .lp file must stay inside that file's folder, after resolving
+  // "..", absolute paths and symbolic links: a shared capture must not make the reader open (and a
+  // pack then carry, hashed and named) files from elsewhere on this machine. true: any path.
+  bool allow_outside_paths = false;
 
   Status Validate() const;
 };

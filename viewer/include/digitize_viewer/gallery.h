@@ -63,10 +63,14 @@ struct GalleryShotOptions {
 
 // Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
 // camera of `path` when given, written as out_png with _NNN before the extension) and writes
-// 8-bit sRGB PNGs. Errors: no GL context, a pack the renderer refuses (named), the PNG write.
+// 8-bit sRGB PNGs. A pack the viewer refuses (PreparePainting, AddPainting) is appended to
+// `*failed` (naming it) and the others are hung and rendered; with failed = nullptr it is the
+// error. Errors: no GL context, an image size this GL cannot render (Renderer::CheckImageSize),
+// the PNG write.
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path = {},
-                                const GalleryShotOptions& options = {});
+                                const GalleryShotOptions& options = {},
+                                std::vector<std::string>* failed = nullptr);
 
 }  // namespace digitize::viewer

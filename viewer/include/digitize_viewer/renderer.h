@@ -154,8 +154,8 @@ class Renderer {
   Renderer& operator=(const Renderer&) = delete;
 
   // Uploads a pack (textures, boxes) placed in the world by world_from_canvas. Errors (`name`
-  // says which pack): empty or inconsistent maps, fewer than 2 x 2 texels, textures over the GL
-  // limit. Returns the painting's index.
+  // says which pack): what PreparePainting refuses (painting_setup.h: fewer than 2 x 2 texels, a
+  // pack that does not Validate), textures over the GL limit. Returns the painting's index.
   Result<int> AddPainting(const Pack& pack, const std::string& name,
                           const RigidTransform& world_from_canvas = {},
                           const MeshOptions& mesh = {});
@@ -166,8 +166,16 @@ class Renderer {
   // to black. Point lights only (directional lights are ignored), at most kMaxLights.
   FrameStats Draw(const ViewCamera& camera, const std::vector<Light>& lights,
                   const RenderOptions& options);
+  // Whether Render can produce a width x height image here: both sides at least 1 and within
+  // this GL's limits (GL_MAX_RENDERBUFFER_SIZE, GL_MAX_TEXTURE_SIZE, GL_MAX_VIEWPORT_DIMS), and
+  // at most kMaxRenderPixels (the float target, its read-back and the image take ~50 bytes a
+  // pixel). The error says which limit, e.g. "a 100000x100000 image is larger than this
+  // OpenGL's maximum render target size 16384".
+  Status CheckImageSize(int width, int height) const;
+  static constexpr int64_t kMaxRenderPixels = int64_t{1} << 26;  // 8192 x 8192: ~3.4 GB
+
   // Draws into an internal float framebuffer and reads it back. Throws InvariantError on invalid
-  // options or camera (the caller's code).
+  // options or camera, or an image size CheckImageSize refuses (the caller's code).
   RenderedImage Render(const ViewCamera& camera, const std::vector<Light>& lights,
                        const RenderOptions& options);
 

@@ -1,0 +1,47 @@
+// What the viewer derives from packs before anything goes to the GPU: Renderer::AddPainting's
+// GL-free half (the checks, the painting's extent, height range and box peaks) and the gallery's
+// set-up for a list of packs (which hang, which are refused). Split from the renderer so that the
+// load path (pack file -> LoadPackForViewer -> PreparePainting -> MakeGallery) runs without GL:
+// in tests and in the fuzz target tests/fuzz/fuzz_viewer_load.cpp.
+//
+// Layer: viewer (libdigitize only, no GL).
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/pack.h"
+#include "digitize/relief.h"
+#include "digitize_viewer/gallery.h"
+
+namespace digitize::viewer {
+
+struct PaintingSetup {
+  int texels_w = 0, texels_h = 0;
+  double pitch_mm = 0, width_mm = 0, height_mm = 0;  // canvas extent, canvas frame
+  double delta0_mm = 0;                              // the bump plane
+  double min_height_mm = 0;                          // lowest texel
+  double max_height_mm = 0;                          // top of the boxes: H, or the highest texel
+                                                     // when a pack's H is below it
+  std::vector<ReliefBox> boxes;
+  std::vector<Vec3d> box_tops;  // per box: (u_max, v_max)'s texel centre at h_max, canvas frame
+};
+
+// Errors name the pack (`name`): fewer than 2 x 2 texels, or a pack that does not Validate
+// (pack.h: sizes, finite values, the physical bounds on pitch, extent, heights and placement).
+// Every value of a result is finite.
+Result<PaintingSetup> PreparePainting(const Pack& pack, const std::string& name);
+
+// The gallery for `packs` (name, pack), in order: each prepared; those refused are listed (one
+// error each, naming the pack) and the others hung side by side (MakeGallery), without a gap.
+struct GalleryScene {
+  Gallery gallery;
+  std::vector<size_t> hung;          // index into packs of each gallery.world_from_canvas
+  std::vector<std::string> failed;   // one message per refused pack
+};
+GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& packs,
+                           const GalleryOptions& options = {});
+
+}  // namespace digitize::viewer
