@@ -4,6 +4,7 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -105,7 +106,8 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     return Error{path.string() + ": cannot write an empty image (" + std::to_string(spec.width) +
                  "x" + std::to_string(spec.height) + ")"};
   }
-  return WriteImageAtomically(path, format, [&](OIIO::ImageOutput& out, const std::string& temp) -> Status {
+  return WriteImageAtomically(path, format, [&](OIIO::ImageOutput& out, const std::string& temp,
+                                                    OIIO::Filesystem::IOProxy*) -> Status {
     if (!out.open(temp, spec))
       return Error{path.string() + ": cannot open for writing: " + OneLine(out.geterror())};
     const bool wrote = out.write_image(spec.format, pixels);
@@ -198,7 +200,8 @@ Status WriteAtomically(const fs::path& path,
 
 Status WriteImageAtomically(
     const fs::path& path, const char* format,
-    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp)>& write) {
+    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp,
+                               OIIO::Filesystem::IOProxy* proxy)>& write) {
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
     auto out = OIIO::ImageOutput::create(format);
     if (!out) return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
@@ -208,13 +211,22 @@ Status WriteImageAtomically(
     if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
     CheckedFile proxy(file);
     Status status = out->set_ioproxy(&proxy)
-                        ? write(*out, temp.string())
+                        ? write(*out, temp.string(), &proxy)
                         : Status(Error{path.string() + ": cannot write through a checked file"});
     out.reset();  // a writer left open by a failed write closes here, before its file does
     Status finished = FinishFile(file, temp, path, proxy.error(), proxy.extent());
     // The cause (a full disk) says more than the codec's view of it.
     return proxy.error() != 0 || status.ok() ? finished : status;
   });
+}
+
+Status WithDiskFull(Status status, const fs::path& path) {
+  if (status.ok()) return status;
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  struct statvfs disk {};
+  if (::statvfs(dir.c_str(), &disk) == 0 && disk.f_bavail == 0)
+    return Error{status.message() + " (" + Cause(ENOSPC) + ")"};
+  return status;
 }
 
 Result<std::string> OutputFormatFor(const fs::path& path) {
