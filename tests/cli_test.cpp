@@ -14,6 +14,9 @@
 #include <string>
 #include <vector>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -23,11 +26,14 @@ struct Output {
   std::string text;  // stdout + stderr
 };
 
-Output RunCli(const std::string& args) {
+// `digitize ARGS`, run from `cwd` when given.
+Output RunCli(const std::string& args, const fs::path& cwd = {}) {
   static int counter = 0;
   const fs::path log = fs::temp_directory_path() / ("digitize_cli_test_" + std::to_string(::getpid()) + "_" +
                                                     std::to_string(counter++) + ".log");
-  const std::string command = std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
+  const std::string cd = cwd.empty() ? "" : "cd '" + cwd.string() + "' && ";
+  const std::string command =
+      "(" + cd + std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() + " 2>&1";
   const int status = std::system(command.c_str());
   Output out;
   out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -37,6 +43,13 @@ Output RunCli(const std::string& args) {
   out.text = ss.str();
   fs::remove(log);
   return out;
+}
+
+std::string Bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
 }
 
 class CliTest : public ::testing::Test {
@@ -217,7 +230,10 @@ TEST_F(CliTest, PackRunInspectVerify) {
   EXPECT_EQ(verify.exit_code, 0) << verify.text;
   EXPECT_NE(verify.text.find("valid"), std::string::npos) << verify.text;
 
-  // One go: scan + photos -> pack, with held-out PSNR from the written pack.
+  // One go: scan + photos -> pack, with held-out PSNR from the written pack. --work names a
+  // folder of the user's: only its canvas/ and fit/ are written, the rest stays.
+  fs::create_directories(Path("w/notes"));
+  std::ofstream(Path("w/notes/todo.txt")) << "mine";
   Output run = RunCli("run " + Path("s/scan.exr") + " --photos " + Path("s/photos/calib.json") +
                       " --held-out " + Path("s/photos/held_out/calib.json") + " --out " +
                       Path("r.pack.exr") + " --work " + Path("w"));
@@ -225,6 +241,7 @@ TEST_F(CliTest, PackRunInspectVerify) {
   EXPECT_NE(run.text.find("from the pack: held-out PSNR"), std::string::npos) << run.text;
   EXPECT_TRUE(fs::exists(Path("w/canvas/height.exr")));
   EXPECT_TRUE(fs::exists(Path("w/fit/rho_d.exr")));
+  EXPECT_TRUE(fs::exists(Path("w/notes/todo.txt")));
   EXPECT_EQ(RunCli("verify " + Path("r.pack.exr")).exit_code, 0);
   const auto jr = InspectJson(Path("r.pack.exr"));
   EXPECT_GE(jr["provenance"]["inputs"].size(), 18u);  // scan + calibration + 16 photos
@@ -527,6 +544,143 @@ TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
             std::string::npos)
       << dup.text;
   EXPECT_FALSE(fs::exists(Path("g")));
+}
+
+// Issue 10, section 1: a folder given as --out is replaced only when it is new, empty or an
+// earlier output of the same kind; a folder of the user's files survives every command.
+TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
+  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
+                   "--lights 8 --seed 2").exit_code, 0);
+  ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
+  fs::create_directories(Path("docs/notes"));
+  std::ofstream(Path("docs/notes/condition_report.txt")) << "irreplaceable";
+  const std::string docs = Path("docs");
+  for (const std::string& cmd :
+       {"synth --resolution 96 --scan-size 96 96 --out " + docs,
+        "preprocess " + Path("s/scan.exr") + " --out " + docs,
+        "fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") + " --out " + docs,
+        "demo --resolution 96 --scan-px 96 --out " + docs,
+        "run " + Path("s/scan.exr") + " --photos " + Path("s/photos/calib.json") + " --out " +
+            Path("r.pack.exr") + " --work " + Path("work")}) {
+    // run --work replaces only work/canvas and work/fit: here a folder of the user's.
+    fs::create_directories(Path("work/canvas"));
+    std::ofstream(Path("work/canvas/mine.txt")) << "mine";
+    Output out = RunCli(cmd);
+    EXPECT_EQ(out.exit_code, 1) << cmd << "\n" << out.text;
+    EXPECT_NE(out.text.find("refusing"), std::string::npos) << out.text;
+    EXPECT_EQ(Bytes(Path("docs/notes/condition_report.txt")), "irreplaceable") << cmd;
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir_ / "docs"), fs::directory_iterator()), 1)
+        << cmd << ": nothing added";
+  }
+  Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + docs);
+  EXPECT_NE(pre.text.find(docs + ": holds 'notes/'"), std::string::npos)
+      << "names the folder and one thing in it: " << pre.text;
+  EXPECT_EQ(Bytes(Path("work/canvas/mine.txt")), "mine");
+  EXPECT_FALSE(fs::exists(Path("work/fit")));
+  EXPECT_FALSE(fs::exists(Path("r.pack.exr")));
+
+  // An output of another kind is not replaced either: a canvas over a fit folder.
+  ASSERT_EQ(RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
+                   " --out " + Path("f")).exit_code, 0);
+  Output kind = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("f"));
+  EXPECT_EQ(kind.exit_code, 1);
+  EXPECT_NE(kind.text.find("fit output of `digitize fit`"), std::string::npos) << kind.text;
+  EXPECT_TRUE(fs::exists(Path("f/rho_d.exr")));
+}
+
+// An earlier output of the same command is replaced on a re-run; an empty folder is accepted; a
+// file added to an output makes it the user's.
+TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
+  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96").exit_code, 0);
+  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --seed 4").exit_code, 0);
+  fs::create_directories(Path("empty"));
+  Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty"));
+  ASSERT_EQ(pre.exit_code, 0) << pre.text;
+  EXPECT_TRUE(fs::exists(Path("empty/height.exr")));
+  EXPECT_TRUE(fs::exists(Path("empty/.digitize-output")));
+  const auto marker = nlohmann::json::parse(Bytes(Path("empty/.digitize-output")), nullptr, false);
+  EXPECT_EQ(marker.value("format", ""), "digitize.output");
+  EXPECT_EQ(marker.value("command", ""), "preprocess");
+  EXPECT_EQ(marker.value("content", ""), "canvas");
+  Output again = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty") + " --cell-px 8");
+  ASSERT_EQ(again.exit_code, 0) << again.text;
+  std::ofstream(Path("empty/my_notes.txt")) << "mine";
+  Output mine = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty"));
+  EXPECT_EQ(mine.exit_code, 1);
+  EXPECT_NE(mine.text.find("my_notes.txt"), std::string::npos) << mine.text;
+  EXPECT_EQ(Bytes(Path("empty/my_notes.txt")), "mine");
+}
+
+// No output onto, into or above an input, the current directory or its parents.
+TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
+  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
+                   "--lights 8 --seed 2").exit_code, 0);
+  fs::create_directories(Path("museum/scans"));
+  fs::copy_file(Path("s/scan.exr"), Path("museum/scans/scan.exr"));
+  std::ofstream(Path("museum/notes.txt")) << "irreplaceable";
+  const std::string scan_bytes = Bytes(Path("museum/scans/scan.exr"));
+  const std::string scan = Path("museum/scans/scan.exr");
+  for (const std::string& out : {Path("museum"), Path("museum/scans"), scan, Path("museum/scans/"),
+                                 Path("museum/scans/../scans"), dir_.string()}) {
+    Output o = RunCli("preprocess " + scan + " --out " + out);
+    EXPECT_EQ(o.exit_code, 1) << out << "\n" << o.text;
+    EXPECT_NE(o.text.find("input"), std::string::npos) << o.text;
+    EXPECT_EQ(Bytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
+  }
+  // The current directory, however it is spelled, and its parent.
+  for (const std::string& out : {std::string("."), std::string("./"), Path("museum/scans"),
+                                 std::string(".."), std::string("\"$PWD\"")}) {
+    Output o = RunCli("preprocess scan.exr --out " + out, Path("museum/scans"));
+    EXPECT_EQ(o.exit_code, 1) << out << "\n" << o.text;
+    EXPECT_EQ(o.text.find("Success"), std::string::npos) << o.text;
+    EXPECT_EQ(Bytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
+  }
+  Output synth_here = RunCli("synth --resolution 96 --scan-size 96 96 --out .", Path("museum"));
+  EXPECT_EQ(synth_here.exit_code, 1);
+  EXPECT_NE(synth_here.text.find("current directory"), std::string::npos) << synth_here.text;
+  EXPECT_EQ(Bytes(Path("museum/notes.txt")), "irreplaceable");
+
+  // pack onto a file of its canvas folder; fit into its canvas; run onto one of its photos.
+  ASSERT_EQ(RunCli("preprocess " + scan + " --out " + Path("c")).exit_code, 0);
+  ASSERT_EQ(RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
+                   " --out " + Path("f")).exit_code, 0);
+  const std::string height = Bytes(Path("c/height.exr"));
+  Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("c/height.exr"));
+  EXPECT_EQ(pack.exit_code, 1) << pack.text;
+  EXPECT_NE(pack.text.find("c/height.exr: lies inside the input"), std::string::npos) << pack.text;
+  EXPECT_EQ(Bytes(Path("c/height.exr")), height);
+  Output fit = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
+                      " --out " + Path("c"));
+  EXPECT_EQ(fit.exit_code, 1) << fit.text;
+  EXPECT_EQ(Bytes(Path("c/height.exr")), height);
+  fs::path photo;
+  for (const auto& e : fs::directory_iterator(Path("s/photos/images"))) photo = e.path();
+  const std::string photo_bytes = Bytes(photo);
+  Output run = RunCli("run --photos " + Path("s/photos/calib.json") + " " + scan + " --out " + photo.string());
+  EXPECT_EQ(run.exit_code, 1) << run.text;
+  EXPECT_NE(run.text.find("is the input"), std::string::npos) << run.text;
+  EXPECT_EQ(Bytes(photo), photo_bytes);
+}
+
+// A killed folder command leaves ".NAME.partial-PID-N/"; the next run removes those of dead
+// processes and keeps a live one's.
+TEST_F(CliTest, StaleTemporaryFoldersAreRemoved) {
+  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96").exit_code, 0);
+  ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
+  // A pid that is certainly not running: a child that has exited and been reaped.
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ::waitpid(child, nullptr, 0);
+  const std::string pid = std::to_string(child);
+  const std::string live = std::to_string(::getpid());
+  for (const std::string& name : {".c.partial-" + pid + "-0", ".c.old-" + pid + "-1", ".c.partial-" + live + "-7"}) {
+    fs::create_directories(dir_ / name / "deep");
+    std::ofstream(dir_ / name / "deep" / "height.exr") << "hundreds of MB";
+  }
+  ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
+  EXPECT_FALSE(fs::exists(dir_ / (".c.partial-" + pid + "-0")));
+  EXPECT_FALSE(fs::exists(dir_ / (".c.old-" + pid + "-1")));
+  EXPECT_TRUE(fs::exists(dir_ / (".c.partial-" + live + "-7"))) << "a running writer's";
 }
 
 }  // namespace

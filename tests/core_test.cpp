@@ -61,6 +61,8 @@ TEST(Result, ValueOrErrorNeverBoth) {
   EXPECT_EQ(FormatNumber(0.25), "0.25");
 }
 
+const FolderOutput kOutput{"test", "test", {}};
+
 class OutputDirTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -83,13 +85,13 @@ TEST_F(OutputDirTest, SuccessReplacesAFailureKeepsTheOldSet) {
       return Status::Ok();
     };
   };
-  ASSERT_TRUE(WriteDirectoryAtomically(out, write("first")).ok());
-  ASSERT_TRUE(WriteDirectoryAtomically(out, write("second")).ok());
+  ASSERT_TRUE(WriteDirectoryAtomically(out, kOutput, write("first")).ok());
+  ASSERT_TRUE(WriteDirectoryAtomically(out, kOutput, write("second")).ok());
   std::string content;
   std::getline(std::ifstream(out / "a.txt"), content);
   EXPECT_EQ(content, "second");
 
-  const Status failed = WriteDirectoryAtomically(out, [](const fs::path& dir) {
+  const Status failed = WriteDirectoryAtomically(out, kOutput, [](const fs::path& dir) {
     std::ofstream(dir / "a.txt") << "partial";
     return Status(Error{"b.txt: disk full"});
   });
@@ -98,12 +100,13 @@ TEST_F(OutputDirTest, SuccessReplacesAFailureKeepsTheOldSet) {
   std::getline(std::ifstream(out / "a.txt"), content);
   EXPECT_EQ(content, "second") << "the previous complete output survives";
   EXPECT_EQ(Entries(), 1u) << "no temporary folder left behind";
+  EXPECT_TRUE(fs::is_regular_file(out / kOutputMarkerName)) << "the marker of the complete set";
 }
 
 TEST_F(OutputDirTest, AFileInTheWayIsNotReplaced) {
   const fs::path out = root_ / "taken";
   std::ofstream(out) << "keep";
-  const Status s = WriteDirectoryAtomically(out, [](const fs::path&) { return Status::Ok(); });
+  const Status s = WriteDirectoryAtomically(out, kOutput, [](const fs::path&) { return Status::Ok(); });
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("taken"), std::string::npos) << s.message();
   EXPECT_TRUE(fs::is_regular_file(out));

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 
 #include "digitize/image_io.h"
@@ -587,6 +588,42 @@ TEST(ViewerTest, ImpossibleScreenshotSizesAreRefused) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("100000x100000"), std::string::npos) << s.message();
   EXPECT_FALSE(std::filesystem::exists(dir / "huge.png"));
+  std::filesystem::remove_all(dir);
+}
+
+// Issue 10: --screenshot writes what its extension says (read back: the format OpenImageIO finds),
+// refuses an unknown extension and an output onto an input, before rendering anything.
+TEST(ViewerTest, ScreenshotFormatFollowsTheExtension) {
+  REQUIRE_GL();
+  const auto dir = TempDir();
+  GalleryShotOptions shot;
+  shot.width = 64;
+  shot.height = 36;
+  for (const auto& [name, format] : std::vector<std::pair<std::string, std::string>>{
+           {"shot.jpg", "jpeg"}, {"shot.png", "png"}, {"shot.tif", "tiff"}, {"shot.exr", "openexr"}}) {
+    const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / name, {}, shot);
+    ASSERT_TRUE(s.ok()) << s.message();
+    auto header = ReadImageHeader(dir / name);
+    ASSERT_TRUE(header.ok()) << header.error().message;
+    EXPECT_EQ(header->format, format) << name;
+    EXPECT_EQ(header->width, 64);
+  }
+  const Status bmp = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "shot.bmp", {}, shot);
+  EXPECT_FALSE(bmp.ok());
+  EXPECT_NE(bmp.message().find("shot.bmp: unknown image extension"), std::string::npos) << bmp.message();
+  EXPECT_FALSE(std::filesystem::exists(dir / "shot.bmp"));
+
+  // The screenshot aimed at an input (here the "pack" file) is refused; the input is intact.
+  const auto pack_file = dir / "painting.pack.png";
+  std::ofstream(pack_file) << "a pack";
+  shot.inputs = {pack_file};
+  const Status onto = RenderGalleryScreenshots({{"synthetic", Get().pack}}, pack_file, {}, shot);
+  EXPECT_FALSE(onto.ok());
+  EXPECT_NE(onto.message().find("is the input"), std::string::npos) << onto.message();
+  std::ifstream in(pack_file);
+  std::string content;
+  std::getline(in, content);
+  EXPECT_EQ(content, "a pack");
   std::filesystem::remove_all(dir);
 }
 

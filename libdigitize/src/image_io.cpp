@@ -1,20 +1,28 @@
 // Image files through OpenImageIO, and atomic replacement of output files.
 #include "digitize/image_io.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <exception>
 #include <fstream>
+#include <mutex>
 #include <new>
 #include <string>
 #include <system_error>
+
+#include "checked_output.h"
 
 namespace digitize {
 namespace {
@@ -35,23 +43,60 @@ fs::path TempPathFor(const fs::path& path) {
   return path.parent_path() / temp_name;
 }
 
-// A writer killed mid-write (SIGKILL, power loss) leaves its temporary file behind; the next
-// write of the same target removes those whose process is gone. Files of a live writer stay.
-void RemoveStaleTemporaries(const fs::path& path) {
-  const std::string prefix = "." + path.filename().string() + ".tmp-";
-  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-  std::error_code ec;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    if (name.rfind(prefix, 0) != 0) continue;
-    const std::string rest = name.substr(prefix.size());  // "<pid>-<n><ext>"
-    char* after = nullptr;
-    const long pid = std::strtol(rest.c_str(), &after, 10);
-    if (pid <= 0 || after == rest.c_str() || *after != '-') continue;
-    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or unknown
-    std::error_code rm;
-    fs::remove(it->path(), rm);
+// "No space left on device" -> "no space left on device": the cause, inside a sentence.
+std::string Cause(int error) {
+  std::string text = std::generic_category().message(error);
+  if (!text.empty()) text[0] = static_cast<char>(std::tolower(static_cast<unsigned char>(text[0])));
+  return text;
+}
+
+// The file an OpenImageIO writer writes through: every short write is recorded (its errno) and
+// reported to the writer as complete, so that no codec library gives up halfway in its own way;
+// FinishFile reports the failure.
+class CheckedFile final : public OIIO::Filesystem::IOFile {
+ public:
+  explicit CheckedFile(FILE* file) : IOFile(file, IOProxy::Write) {}
+  // Not "file": writers that see a file proxy take its FILE* and write past these checks.
+  const char* proxytype() const override { return "checked-file"; }
+  size_t write(const void* buf, size_t size) override {
+    const int64_t at = tell();
+    errno = 0;
+    return Checked(IOFile::write(buf, size), size, at);
   }
+  size_t pwrite(const void* buf, size_t size, int64_t offset) override {
+    errno = 0;
+    return Checked(IOFile::pwrite(buf, size, offset), size, offset);
+  }
+  int error() const { return error_; }
+  uint64_t extent() const { return extent_; }
+
+ private:
+  size_t Checked(size_t written, size_t size, int64_t at) {
+    std::lock_guard<std::mutex> lock(checked_mutex_);
+    if (written != size && error_ == 0) error_ = errno != 0 ? errno : EIO;
+    extent_ = std::max<uint64_t>(extent_, static_cast<uint64_t>(std::max<int64_t>(at, 0)) + size);
+    return size;
+  }
+  std::mutex checked_mutex_;
+  int error_ = 0;
+  uint64_t extent_ = 0;
+};
+
+// Flushes, syncs (a full disk may only show here) and closes `file`, then checks that `temp`
+// holds `bytes` bytes. `error` is a write failure seen before; the first failure is reported.
+Status FinishFile(FILE* file, const fs::path& temp, const fs::path& path, int error,
+                  uint64_t bytes) {
+  if (std::fflush(file) != 0 && error == 0) error = errno;
+  if (::fsync(::fileno(file)) != 0 && error == 0 && errno != EINVAL) error = errno;
+  if (std::fclose(file) != 0 && error == 0) error = errno;
+  if (error != 0) return Error{path.string() + ": write failed: " + Cause(error)};
+  std::error_code ec;
+  const uintmax_t size = fs::file_size(temp, ec);
+  if (ec) return Error{path.string() + ": write failed: " + ec.message()};
+  if (size == 0 || size != bytes)
+    return Error{path.string() + ": write failed: the file holds " + std::to_string(size) +
+                 " bytes of " + std::to_string(bytes) + " written"};
+  return Status::Ok();
 }
 
 // Writes interleaved pixels of one type through the OIIO writer named by `format`.
@@ -61,18 +106,14 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     return Error{path.string() + ": cannot write an empty image (" + std::to_string(spec.width) +
                  "x" + std::to_string(spec.height) + ")"};
   }
-  return WriteAtomically(path, [&](const fs::path& temp) -> Status {
-    auto out = OIIO::ImageOutput::create(format);
-    if (!out)
-      return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
-    OIIO::ImageSpec file_spec = spec;
-    if (!out->open(temp.string(), file_spec)) {
-      return Error{path.string() + ": cannot open for writing: " + OneLine(out->geterror())};
-    }
-    const bool wrote = out->write_image(spec.format, pixels);
-    const bool closed = out->close();
+  return WriteImageAtomically(path, format, [&](OIIO::ImageOutput& out, const std::string& temp,
+                                                    OIIO::Filesystem::IOProxy*) -> Status {
+    if (!out.open(temp, spec))
+      return Error{path.string() + ": cannot open for writing: " + OneLine(out.geterror())};
+    const bool wrote = out.write_image(spec.format, pixels);
+    const bool closed = out.close();
     if (!wrote || !closed)
-      return Error{path.string() + ": write failed: " + OneLine(out->geterror())};
+      return Error{path.string() + ": write failed: " + OneLine(out.geterror())};
     return Status::Ok();
   });
 }
@@ -107,6 +148,23 @@ std::string JoinNames(const std::vector<std::string>& names) {
 
 }  // namespace
 
+void RemoveStaleTemporaries(const fs::path& dir, const std::string& prefix) {
+  const fs::path where = dir.empty() ? fs::path(".") : dir;
+  std::error_code ec;
+  std::vector<fs::path> stale;  // removed after the listing: removing while iterating is unspecified
+  for (fs::directory_iterator it(where, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string rest = name.substr(prefix.size());  // "<pid>-<n>..."
+    char* after = nullptr;
+    const long pid = std::strtol(rest.c_str(), &after, 10);
+    if (pid <= 0 || after == rest.c_str() || *after != '-') continue;
+    if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;  // alive, or unknown
+    stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove_all(p, ec);
+}
+
 Status WriteAtomically(const fs::path& path,
                        const std::function<Status(const fs::path& temp_path)>& write) {
   if (path.filename().empty()) return Error{path.string() + ": not a file name"};
@@ -135,8 +193,51 @@ Status WriteAtomically(const fs::path& path,
       status = Error{path.string() + ": cannot move the finished file into place: " + ec.message()};
   }
   if (!status.ok()) fs::remove(temp, ec);  // best effort; the error already says what failed
-  RemoveStaleTemporaries(path);
+  // A writer killed mid-write (SIGKILL, power loss) leaves its temporary file behind.
+  RemoveStaleTemporaries(dir, "." + path.filename().string() + ".tmp-");
   return status;
+}
+
+Status WriteImageAtomically(
+    const fs::path& path, const char* format,
+    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp,
+                               OIIO::Filesystem::IOProxy* proxy)>& write) {
+  return WriteAtomically(path, [&](const fs::path& temp) -> Status {
+    auto out = OIIO::ImageOutput::create(format);
+    if (!out) return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
+    if (!out->supports("ioproxy"))
+      return Error{path.string() + ": the " + format + " writer cannot write through a checked file"};
+    FILE* file = std::fopen(temp.c_str(), "wb");
+    if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
+    CheckedFile proxy(file);
+    Status status = out->set_ioproxy(&proxy)
+                        ? write(*out, temp.string(), &proxy)
+                        : Status(Error{path.string() + ": cannot write through a checked file"});
+    out.reset();  // a writer left open by a failed write closes here, before its file does
+    Status finished = FinishFile(file, temp, path, proxy.error(), proxy.extent());
+    // The cause (a full disk) says more than the codec's view of it.
+    return proxy.error() != 0 || status.ok() ? finished : status;
+  });
+}
+
+Status WithDiskFull(Status status, const fs::path& path) {
+  if (status.ok()) return status;
+  const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  struct statvfs disk {};
+  if (::statvfs(dir.c_str(), &disk) == 0 && disk.f_bavail == 0)
+    return Error{status.message() + " (" + Cause(ENOSPC) + ")"};
+  return status;
+}
+
+Result<std::string> OutputFormatFor(const fs::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".png") return std::string("png");
+  if (ext == ".jpg" || ext == ".jpeg") return std::string("jpeg");
+  if (ext == ".tif" || ext == ".tiff") return std::string("tiff");
+  if (ext == ".exr") return std::string("openexr");
+  return Error{path.string() + ": unknown image extension '" + path.extension().string() +
+               "'; write .png, .jpg, .tif or .exr"};
 }
 
 std::string OneLine(std::string text) {
@@ -196,12 +297,12 @@ std::string EscapeForTerminal(std::string_view text) {
 
 Status WriteTextFile(const fs::path& path, const std::string& text) {
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
-    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    if (!out) return Error{path.string() + ": cannot open for writing"};
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.close();
-    if (!out) return Error{path.string() + ": write failed (disk full?)"};
-    return Status::Ok();
+    FILE* file = std::fopen(temp.c_str(), "wb");
+    if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
+    errno = 0;
+    const size_t wrote = std::fwrite(text.data(), 1, text.size(), file);
+    const int error = wrote == text.size() ? 0 : (errno != 0 ? errno : EIO);
+    return FinishFile(file, temp, path, error, text.size());
   });
 }
 
@@ -238,6 +339,27 @@ Status WritePngRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& im
   CheckStorage(image);
   const OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
   return WritePixels(path, "png", spec, image.data.data());
+}
+
+Status WriteRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image) {
+  CheckStorage(image);
+  auto format = OutputFormatFor(path);
+  if (!format.ok()) return Status(format.error());
+  OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+  // Not for TIFF: its colour space goes into an Exif directory, which libtiff links by reading
+  // the file back, and the checked file is write-only (the result would not open).
+  if (*format != "tiff") spec.attribute("oiio:ColorSpace", "sRGB");
+  if (*format == "jpeg") spec.attribute("Compression", "jpeg:95");
+  if (*format != "openexr") return WritePixels(path, format->c_str(), spec, image.data.data());
+  // OpenEXR holds linear values: the sRGB codes decoded.
+  std::vector<float> linear(image.data.size() * 3);
+  for (size_t i = 0; i < linear.size(); ++i) {
+    const double c = image.data[i / 3][i % 3] / 255.0;
+    linear[i] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+  }
+  OIIO::ImageSpec exr(image.width, image.height, 3, OIIO::TypeDesc::FLOAT);
+  exr.attribute("compression", "zip");
+  return WritePixels(path, "openexr", exr, linear.data());
 }
 
 namespace {

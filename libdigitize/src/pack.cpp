@@ -17,6 +17,7 @@
 #include <system_error>
 
 #include "digitize/image_io.h"
+#include "checked_output.h"
 
 namespace digitize {
 namespace {
@@ -735,20 +736,23 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
   meta.attribute("digitize:checksum", PackChecksum(meta, data, data_bytes));
 
+  // Not through WriteImageAtomically: OpenImageIO's multi-part OpenEXR open ignores I/O
+  // proxies. OpenEXR reports failed writes itself; a full disk is named from the file system.
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
     auto out = OIIO::ImageOutput::create("openexr");
     if (!out) return Error{file + ": no OpenEXR writer: " + OneLine(OIIO::geterror())};
     if (!out->supports("multiimage"))
       return Error{file + ": this OpenImageIO cannot write multi-part OpenEXR"};
     if (!out->open(temp.string(), kParts, specs))
-      return Error{file + ": cannot open for writing: " + OneLine(out->geterror())};
+      return WithDiskFull(Error{file + ": cannot open for writing: " + OneLine(out->geterror())}, path);
     for (int p = 0; p < kParts; ++p) {
       if (p > 0 && !out->open(temp.string(), specs[p], OIIO::ImageOutput::AppendSubimage))
-        return Error{file + ": cannot start part " + kPartNames[p] + ": " + OneLine(out->geterror())};
+        return WithDiskFull(
+            Error{file + ": cannot start part " + kPartNames[p] + ": " + OneLine(out->geterror())}, path);
       if (!out->write_image(specs[p].format, data[p]))
-        return Error{file + ": write failed: " + OneLine(out->geterror())};
+        return WithDiskFull(Error{file + ": write failed: " + OneLine(out->geterror())}, path);
     }
-    if (!out->close()) return Error{file + ": write failed: " + OneLine(out->geterror())};
+    if (!out->close()) return WithDiskFull(Error{file + ": write failed: " + OneLine(out->geterror())}, path);
     return Status::Ok();
   });
 }

@@ -63,6 +63,9 @@ int RunDemo(const DemoArgs& args) {
   // The fit's noise level is the photos' (linear units; 8-bit quantisation adds ~0.001).
   fit_options.fit.noise_sigma = std::max(photo_options.noise_sigma, 0.001);
   if (Status s = fit_options.Validate(); !s.ok()) return Fail(cmd, s.message());
+  const std::filesystem::path out = args.out;
+  const FolderOutput output{cmd, "demo", {}};
+  if (Status s = CheckFolderOutput(out, output); !s.ok()) return Fail(cmd, s.message());
 
   std::printf("digitize demo: a synthetic %.0f x %.0f mm painting (%d texels on the long side), "
               "framed, scanned at %dx%d with %.3f mm noise, %.0f deg tilt, holes and outliers\n",
@@ -148,9 +151,9 @@ int RunDemo(const DemoArgs& args) {
                     .c_str());
   }
 
-  const std::filesystem::path out = args.out;
   std::vector<PackReport> packs;
-  Status written = WriteDirectoryAtomically(out, [&](const std::filesystem::path& dir) {
+  Status gallery = Error{"no fit (--no-fit)"};
+  Status written = WriteDirectoryAtomically(out, output, [&](const std::filesystem::path& dir) {
     if (Status s = synth::WriteSyntheticScan(dir / "scan", painting, scan); !s.ok()) return s;
     if (Status s = WritePreprocessOutputs(dir / "canvas", result, args.options,
                                           {"(synthetic, in memory)"});
@@ -185,6 +188,15 @@ int RunDemo(const DemoArgs& args) {
       if (!score.ok()) return Status(score.error());
       packs.push_back({name, *summary, *score});
     }
+    // The demo ends in the gallery (issue 5): the pack just written, read back as the viewer
+    // reads it and hung in the virtual room, rendered headless (EGL surfaceless). No GL here is
+    // a warning, not a failure: the digitization itself is done.
+    const std::filesystem::path pack_path = dir / "painting.pack.exr";
+    auto pack = viewer::LoadPackForViewer(pack_path);
+    gallery = pack.ok() ? viewer::RenderGalleryScreenshots({{(out / "painting.pack.exr").string(),
+                                                             std::move(*pack)}},
+                                                           dir / "gallery.png")
+                        : Status(pack.error());
     return Status::Ok();
   });
   if (!written.ok()) return Fail(cmd, written.message());
@@ -205,20 +217,13 @@ int RunDemo(const DemoArgs& args) {
                 "inspect`, `digitize verify`)\n",
                 args.out.c_str(), args.out.c_str(), args.out.c_str(), args.out.c_str());
   if (fit) {
-    // The demo ends in the gallery (issue 5): the pack just written, read back as the viewer
-    // reads it and hung in the virtual room, rendered headless (EGL surfaceless). No GL here is
-    // a warning, not a failure: the digitization itself is done.
     const std::filesystem::path pack_path = out / "painting.pack.exr";
-    auto pack = viewer::LoadPackForViewer(pack_path);
-    const std::filesystem::path shot = out / "gallery.png";
-    Status s = pack.ok() ? viewer::RenderGalleryScreenshots({{pack_path.string(), std::move(*pack)}}, shot)
-                         : Status(pack.error());
-    if (s.ok())
+    if (gallery.ok())
       std::printf("gallery:  %s (%s in the virtual gallery, hybrid + adaptive; walk in it with "
                   "digitize-viewer %s)\n",
-                  shot.c_str(), pack_path.c_str(), pack_path.c_str());
+                  (out / "gallery.png").c_str(), pack_path.c_str(), pack_path.c_str());
     else
-      std::printf("gallery screenshot skipped: %s\n", s.message().c_str());
+      std::printf("gallery screenshot skipped: %s\n", gallery.message().c_str());
   }
   return 0;
 }
@@ -231,7 +236,9 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
       "demo",
       "Run the whole pipeline on a synthetic painting generated on the fly and print its accuracy "
       "against the ground truth");
-  c->add_option("-o,--out", args->out, "Output folder")->capture_default_str();
+  c->add_option("-o,--out", args->out,
+                "Output folder: new, empty, or an earlier demo output (replaced only on success)")
+      ->capture_default_str();
   c->add_option("--resolution", args->resolution,
                 "Painting texels along the long side (0 = matched to the scan's sampling)")
       ->capture_default_str();

@@ -56,6 +56,22 @@ int RunFit(FitArgs args) {
     args.options.dark_outlier_ratio = 0;
     args.options.dark_outlier_fit_ratio = 0;
   }
+  // Held-out photos read before the fit: a bad file fails before minutes of work, and its
+  // images are inputs the output must not touch.
+  std::optional<PhotoSet> held;
+  if (!args.held_out.empty()) {
+    Result<PhotoSet> h = ReadPhotoSetFile(args.held_out, args.photo, bar.Callback());
+    if (!h.ok()) return Fail(cmd, h.error().message);
+    held = std::move(h).value();
+  }
+  FolderOutput output{cmd, "fit", {args.photos}};
+  if (!args.canvas.empty()) output.inputs.emplace_back(args.canvas);
+  for (const Photo& p : set->photos) output.inputs.push_back(p.path);
+  if (held) {
+    output.inputs.emplace_back(args.held_out);
+    for (const Photo& p : held->photos) output.inputs.push_back(p.path);
+  }
+  if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
   Result<PreprocessedCanvas> canvas = LoadCanvas(args, *set);
   if (!canvas.ok()) return Fail(cmd, canvas.error().message);
   Result<ReflectanceFitResult> result = FitReflectance(
@@ -65,9 +81,7 @@ int RunFit(FitArgs args) {
     return Fail(cmd, result.error().message);
   }
   std::optional<HeldOutScore> score;
-  if (!args.held_out.empty()) {
-    Result<PhotoSet> held = ReadPhotoSetFile(args.held_out, args.photo, bar.Callback());
-    if (!held.ok()) return Fail(cmd, held.error().message);
+  if (held) {
     auto s = EvaluateHeldOut(canvas->field, canvas->normals, result->maps,
                              canvas->canvas_from_scan, *held);
     if (!s.ok()) return Fail(cmd, s.error().message);
@@ -77,7 +91,7 @@ int RunFit(FitArgs args) {
 
   std::vector<std::string> inputs = {args.photos};
   if (!args.canvas.empty()) inputs.insert(inputs.begin(), args.canvas);
-  Status written = WriteDirectoryAtomically(args.out, [&](const std::filesystem::path& dir) {
+  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
     return WriteReflectanceOutputs(dir, *result, args.options, inputs);
   });
   if (!written.ok()) return Fail(cmd, written.message());
@@ -106,7 +120,7 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
       ->check(CLI::ExistingDirectory);
-  c->add_option("-o,--out", args->out, "Output folder (replaced as a whole, only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier fit output (replaced only on success)")->required();
   c->add_option("--held-out", args->held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
       ->check(CLI::ExistingFile);

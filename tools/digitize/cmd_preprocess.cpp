@@ -29,6 +29,9 @@ Result<std::vector<Scan>> ReadScans(const PreprocessArgs& args) {
 int RunPreprocess(const PreprocessArgs& args) {
   const std::string cmd = "preprocess";
   if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
+  FolderOutput output{cmd, "canvas", {args.scans.begin(), args.scans.end()}};
+  if (!args.mask.empty()) output.inputs.emplace_back(args.mask);
+  if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
   Result<std::vector<Scan>> exposures = ReadScans(args);
   if (!exposures.ok()) return Fail(cmd, exposures.error().message);
   ProgressBar bar("preprocess");
@@ -36,7 +39,7 @@ int RunPreprocess(const PreprocessArgs& args) {
   bar.Finish();
   if (!result.ok()) return Fail(cmd, result.error().message);
 
-  Status written = WriteDirectoryAtomically(args.out, [&](const std::filesystem::path& dir) {
+  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
     return WritePreprocessOutputs(dir, *result, args.options, args.scans);
   });
   if (!written.ok()) return Fail(cmd, written.message());
@@ -116,7 +119,7 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
                 "Scan file(s): float EXR/TIFF (XYZ mm, or depth with --pixel-pitch-mm), 16-bit "
                 "PNG/TIFF (with --height-scale-mm), PLY point grid")
       ->required()->check(CLI::ExistingFile);
-  c->add_option("-o,--out", args->out, "Output folder (replaced as a whole, only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier canvas output (replaced only on success)")->required();
   c->add_option("--mask", args->mask, "Mask image, same size as the scan; 0 = missing sample")
       ->check(CLI::ExistingFile)->group("Input");
   c->add_option("--pixel-pitch-mm", args->read.pixel_pitch_mm,

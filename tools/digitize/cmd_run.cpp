@@ -45,6 +45,32 @@ int Run(RunArgs args) {
     fa.options.dark_outlier_ratio = 0;  // uncalibrated RTI lights: see `digitize fit`
     fa.options.dark_outlier_fit_ratio = 0;
   }
+  std::optional<PhotoSet> held;
+  if (!fa.held_out.empty()) {
+    Result<PhotoSet> h = ReadPhotoSetFile(fa.held_out, fa.photo, bar.Callback());
+    if (!h.ok()) return Fail(cmd, h.error().message);
+    held = std::move(h).value();
+  }
+
+  // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
+  std::vector<std::filesystem::path> inputs(args.preprocess.scans.begin(), args.preprocess.scans.end());
+  if (!args.preprocess.mask.empty()) inputs.emplace_back(args.preprocess.mask);
+  inputs.emplace_back(fa.photos);
+  for (const Photo& p : set->photos) inputs.push_back(p.path);
+  if (held) {
+    inputs.emplace_back(fa.held_out);
+    for (const Photo& p : held->photos) inputs.push_back(p.path);
+  }
+  const std::filesystem::path work(args.work);
+  const FolderOutput work_canvas{cmd, "canvas", inputs}, work_fit{cmd, "fit", inputs};
+  std::vector<std::filesystem::path> pack_keeps_off = inputs;
+  if (!args.work.empty()) {
+    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok()) return Fail(cmd, s.message());
+    if (Status s = CheckFolderOutput(work / "fit", work_fit); !s.ok()) return Fail(cmd, s.message());
+    pack_keeps_off.push_back(work / "canvas");
+    pack_keeps_off.push_back(work / "fit");
+  }
+  if (Status s = CheckOutputPath(args.out, pack_keeps_off); !s.ok()) return Fail(cmd, s.message());
 
   // 2. The canvas: preprocessed scans, or for an RTI capture without a scan its flat image grid.
   PreprocessedCanvas canvas;
@@ -105,14 +131,14 @@ int Run(RunArgs args) {
   provenance.options_json = options.dump();
 
   if (!args.work.empty()) {
-    Status written = WriteDirectoryAtomically(args.work, [&](const std::filesystem::path& dir) {
-      if (preprocessed) {
-        if (Status s = WritePreprocessOutputs(dir / "canvas", *preprocessed, args.preprocess.options,
-                                              args.preprocess.scans);
-            !s.ok())
-          return s;
-      }
-      return WriteReflectanceOutputs(dir / "fit", *fit, fa.options, photo_inputs);
+    if (preprocessed) {
+      Status written = WriteDirectoryAtomically(work / "canvas", work_canvas, [&](const std::filesystem::path& dir) {
+        return WritePreprocessOutputs(dir, *preprocessed, args.preprocess.options, args.preprocess.scans);
+      });
+      if (!written.ok()) return Fail(cmd, written.message());
+    }
+    Status written = WriteDirectoryAtomically(work / "fit", work_fit, [&](const std::filesystem::path& dir) {
+      return WriteReflectanceOutputs(dir, *fit, fa.options, photo_inputs);
     });
     if (!written.ok()) return Fail(cmd, written.message());
   }
@@ -122,11 +148,9 @@ int Run(RunArgs args) {
 
   // 5. Held-out photos relit from the pack as written (what a user of the pack gets).
   std::optional<HeldOutScore> score;
-  if (!fa.held_out.empty()) {
+  if (held) {
     auto read = ReadPack(args.out);
     if (!read.ok()) return Fail(cmd, read.error().message);
-    Result<PhotoSet> held = ReadPhotoSetFile(fa.held_out, fa.photo, bar.Callback());
-    if (!held.ok()) return Fail(cmd, held.error().message);
     auto s = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan, *held);
     if (!s.ok()) return Fail(cmd, s.error().message);
     score = *s;
@@ -161,7 +185,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("-o,--out", args->out, "Pack file to write (replaced only on success)")->required();
   c->add_option("--work", args->work,
-                "Also write the canvas/ and fit/ folders here (for inspection or re-packing)");
+                "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
+                "subfolders are replaced, each when new, empty or an earlier output of its kind)");
   c->add_option("--held-out", args->fit.held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
       ->check(CLI::ExistingFile);

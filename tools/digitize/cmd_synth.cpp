@@ -55,6 +55,8 @@ int RunSynth(SynthArgs args) {
   if (Status s = args.painting.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.scan.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.photo.Validate(); args.photos && !s.ok()) return Fail(cmd, s.message());
+  const FolderOutput output{cmd, "synth", {}};
+  if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
 
   ProgressBar bar("synth");
   // Shares of the bar: the photo set takes most of the time when there is one.
@@ -74,7 +76,7 @@ int RunSynth(SynthArgs args) {
         [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); });
   }
   bar.Update("writing", 0.7 * k + render_share);
-  Status written = WriteDirectoryAtomically(args.out, [&](const std::filesystem::path& dir) {
+  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
     if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
     if (!args.photos) return Status::Ok();
     return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
@@ -96,7 +98,7 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<SynthArgs>();
   CLI::App* c = app.add_subcommand(
       "synth", "Generate a synthetic framed painting, its scan, and the ground truth beside it");
-  c->add_option("-o,--out", args->out, "Output folder (replaced as a whole, only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier synth output (replaced only on success)")->required();
   auto& p = args->painting;
   c->add_option("--seed", p.seed, "Random seed (same seed, same data)")->capture_default_str();
   c->add_option("--width-mm", p.width_mm, "Canvas width (mm)")->capture_default_str()->group("Painting");

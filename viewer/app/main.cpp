@@ -241,7 +241,7 @@ int main(int argc, char** argv) {
   app.add_option("packs", paths, "texture packs (.pack.exr)");
   app.add_flag("--synthetic", synthetic, "also hang a synthetic painting (ground-truth pack)");
   app.add_option("--technique", technique, "mesh, relief, bump, hybrid, adaptive, screen-error");
-  app.add_option("--screenshot", screenshot, "render headless into this PNG and exit");
+  app.add_option("--screenshot", screenshot, "render headless into this image (.png, .jpg, .tif, .exr) and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
   bool heatmap = false, show_boxes = false, shadows = false;
@@ -290,6 +290,8 @@ int main(int argc, char** argv) {
     if (screenshot.empty()) screenshot = "gallery.png";
     GalleryShotOptions shot;
     shot.render = options;
+    shot.inputs.assign(paths.begin(), paths.end());
+    if (!camera_path.empty()) shot.inputs.emplace_back(camera_path);
     if (std::sscanf(size.c_str(), "%dx%d", &shot.width, &shot.height) != 2 || shot.width <= 0 ||
         shot.height <= 0) {
       std::fprintf(stderr, "digitize-viewer: --size must be WxH, got '%s'\n", size.c_str());

@@ -1,11 +1,13 @@
 #include "digitize_viewer/gallery.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
+#include "digitize/output_dir.h"
 #include "digitize_viewer/gl_context.h"
 #include "digitize_viewer/painting_setup.h"
 
@@ -66,6 +68,20 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
                                 const std::vector<ViewCamera>& path,
                                 const GalleryShotOptions& options,
                                 std::vector<std::string>* failed) {
+  const size_t shots = std::max<size_t>(path.size(), 1);
+  std::vector<std::filesystem::path> outs;
+  for (size_t i = 0; i < shots; ++i) {
+    std::filesystem::path out = out_png;
+    if (shots > 1) {
+      char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
+      std::snprintf(suffix, sizeof(suffix), "_%03zu", i);
+      out =
+          out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
+    }
+    if (auto format = OutputFormatFor(out); !format.ok()) return Status(format.error());
+    if (Status s = CheckOutputPath(out, options.inputs); !s.ok()) return s;
+    outs.push_back(std::move(out));
+  }
   auto context = HeadlessContext::Create();
   if (!context) return context.error();
   auto renderer = Renderer::Create();
@@ -95,14 +111,7 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     if (Status s = (*renderer)->CheckImageSize(c.width, c.height); !s.ok()) return s;
   for (size_t i = 0; i < cameras.size(); ++i) {
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, options.render);
-    std::filesystem::path out = out_png;
-    if (cameras.size() > 1) {
-      char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
-      std::snprintf(suffix, sizeof(suffix), "_%03zu", i);
-      out =
-          out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
-    }
-    if (Status s = WritePngRgb8(out, ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
+    if (Status s = WriteRgb8(outs[i], ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
   }
   return Status::Ok();
 }

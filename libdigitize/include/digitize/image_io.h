@@ -20,6 +20,12 @@ namespace digitize {
 Status WriteAtomically(const std::filesystem::path& path,
                        const std::function<Status(const std::filesystem::path& temp_path)>& write);
 
+// Removes the entries of `dir` (files or folders) named prefix + "<pid>-..." whose process is
+// gone: the temporaries of a writer killed mid-write. Those of a live process stay.
+void RemoveStaleTemporaries(const std::filesystem::path& dir, const std::string& prefix);
+
+// Every writer below checks each write, flush and sync of the file and its final size: a full
+// disk is "PATH: write failed: no space left on device", and the previous file stays.
 Status WriteTextFile(const std::filesystem::path& path, const std::string& text);
 
 // A library's multi-line error text as one line ("; " between lines, no trailing newline), so
@@ -49,6 +55,12 @@ Status WriteFloatExr(const std::filesystem::path& path, const Grid<std::array<fl
 Status WritePng8(const std::filesystem::path& path, const Grid<uint8_t>& image);
 // 8-bit RGB PNG (previews).
 Status WritePngRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image);
+// The OpenImageIO format an output file's extension names (case-insensitive): .png "png",
+// .jpg/.jpeg "jpeg", .tif/.tiff "tiff", .exr "openexr"; any other is an error naming the file.
+Result<std::string> OutputFormatFor(const std::filesystem::path& path);
+// 8-bit sRGB RGB image (screenshots) in the format its extension names (OutputFormatFor): PNG,
+// JPEG (quality 95), TIFF as 8-bit sRGB; OpenEXR as the linear values of those codes (float).
+Status WriteRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image);
 
 // Reads any 1-, 3- or 4-channel image OpenImageIO opens, converted to float (callers check the
 // channel count they need).

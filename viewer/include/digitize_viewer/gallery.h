@@ -58,15 +58,19 @@ struct GalleryShotOptions {
   int width = 1280, height = 720;
   RenderOptions render;  // technique etc.; ambient 0.05 by default for the room
   double exposure = 1.0;
+  // The run's inputs (packs, camera path): no screenshot is written onto, into or above them.
+  std::vector<std::filesystem::path> inputs;
   GalleryShotOptions() { render.ambient = 0.05; }
 };
 
 // Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
 // camera of `path` when given, written as out_png with _NNN before the extension) and writes
-// 8-bit sRGB PNGs. A pack the viewer refuses (PreparePainting, AddPainting) is appended to
-// `*failed` (naming it) and the others are hung and rendered; with failed = nullptr it is the
-// error. Errors: no GL context, an image size this GL cannot render (Renderer::CheckImageSize),
-// the PNG write.
+// 8-bit sRGB images in the format the extension names (.png, .jpg, .tif; .exr holds their linear
+// values). Errors, before anything is rendered: an unknown extension, an output onto, into or
+// above an input or the current directory (CheckOutputPath), an image size this GL cannot render
+// (Renderer::CheckImageSize), no GL context. A pack the viewer refuses (PreparePainting,
+// AddPainting) is appended to `*failed` (naming it) and the others are hung and rendered; with
+// failed = nullptr it is the error. A failed write leaves the previous file in place.
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path = {},
