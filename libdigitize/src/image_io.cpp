@@ -292,6 +292,16 @@ Status WritePngRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& im
   return WritePixels(path, "png", spec, image.data.data());
 }
 
+Status WriteSrgbPng(const fs::path& path, int width, int height, int bits, const void* codes,
+                    int zlib_level) {
+  if (bits != 8 && bits != 16)
+    return Error{path.string() + ": PNG codes are 8 or 16 bits, got " + std::to_string(bits)};
+  OIIO::ImageSpec spec(width, height, 3, bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  spec.attribute("png:compressionLevel", zlib_level);
+  return WritePixels(path, "png", spec, codes);
+}
+
 Status WriteRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image) {
   CheckStorage(image);
   auto format = OutputFormatFor(path);
