@@ -93,7 +93,7 @@ Status FinishFile(FILE* file, const fs::path& temp, const fs::path& path, int er
   std::error_code ec;
   const uintmax_t size = fs::file_size(temp, ec);
   if (ec) return Error{path.string() + ": write failed: " + ec.message()};
-  if (size == 0 || size != bytes)
+  if (size != bytes)
     return Error{path.string() + ": write failed: the file holds " + std::to_string(size) +
                  " bytes of " + std::to_string(bytes) + " written"};
   return Status::Ok();
@@ -106,8 +106,7 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     return Error{path.string() + ": cannot write an empty image (" + std::to_string(spec.width) +
                  "x" + std::to_string(spec.height) + ")"};
   }
-  return WriteImageAtomically(path, format, [&](OIIO::ImageOutput& out, const std::string& temp,
-                                                    OIIO::Filesystem::IOProxy*) -> Status {
+  auto write = [&](OIIO::ImageOutput& out, const std::string& temp) -> Status {
     if (!out.open(temp, spec))
       return Error{path.string() + ": cannot open for writing: " + OneLine(out.geterror())};
     const bool wrote = out.write_image(spec.format, pixels);
@@ -115,7 +114,8 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     if (!wrote || !closed)
       return Error{path.string() + ": write failed: " + OneLine(out.geterror())};
     return Status::Ok();
-  });
+  };
+  return WriteImageAtomically(path, format, write);
 }
 
 OIIO::ImageSpec ExrSpec(int width, int height, const std::vector<std::string>& channels,
@@ -200,8 +200,7 @@ Status WriteAtomically(const fs::path& path,
 
 Status WriteImageAtomically(
     const fs::path& path, const char* format,
-    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp,
-                               OIIO::Filesystem::IOProxy* proxy)>& write) {
+    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp)>& write) {
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
     auto out = OIIO::ImageOutput::create(format);
     if (!out) return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
@@ -211,10 +210,12 @@ Status WriteImageAtomically(
     if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
     CheckedFile proxy(file);
     Status status = out->set_ioproxy(&proxy)
-                        ? write(*out, temp.string(), &proxy)
+                        ? write(*out, temp.string())
                         : Status(Error{path.string() + ": cannot write through a checked file"});
     out.reset();  // a writer left open by a failed write closes here, before its file does
     Status finished = FinishFile(file, temp, path, proxy.error(), proxy.extent());
+    if (finished.ok() && status.ok() && proxy.extent() == 0)
+      return Error{path.string() + ": the " + format + " writer wrote nothing"};
     // The cause (a full disk) says more than the codec's view of it.
     return proxy.error() != 0 || status.ok() ? finished : status;
   });
