@@ -300,6 +300,39 @@ TEST_F(CliTest, PackRunInspectVerify) {
       EXPECT_EQ(e.path().filename().string().find(".k.pack.exr.tmp-"), std::string::npos) << e.path();
   }
 
+  // A write that fails part way (file size limit; a full disk where a small tmpfs can be
+  // mounted): exit 1, the file and the cause named, the previous file intact, no temporary left.
+  {
+    std::ofstream(Path("limited.pack.exr")) << "the previous pack";
+    const std::string cmd = "trap '' XFSZ; ulimit -f 40; " + std::string(DIGITIZE_CLI) + " pack --canvas " +
+                            Path("c") + " --fit " + Path("f") + " --out " + Path("limited.pack.exr") +
+                            " > " + Path("limited.log") + " 2>&1";
+    const int status = std::system(cmd.c_str());
+    EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 1);
+    const std::string log = Bytes(Path("limited.log"));
+    EXPECT_NE(log.find("limited.pack.exr: write failed"), std::string::npos) << log;
+    EXPECT_EQ(Bytes(Path("limited.pack.exr")), "the previous pack");
+    for (const auto& e : fs::directory_iterator(dir_))
+      EXPECT_EQ(e.path().filename().string().find(".limited.pack.exr.tmp-"), std::string::npos);
+
+    fs::create_directories(Path("full"));
+    if (::geteuid() == 0 &&
+        std::system(("mount -t tmpfs -o size=64k tmpfs " + Path("full") + " 2>/dev/null").c_str()) == 0) {
+      std::ofstream(Path("full/p.pack.exr")) << "the previous pack";
+      Output full = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("full/p.pack.exr"));
+      const std::string kept = Bytes(Path("full/p.pack.exr"));
+      const auto left = std::distance(fs::directory_iterator(Path("full")), fs::directory_iterator());
+      (void)std::system(("umount " + Path("full")).c_str());
+      EXPECT_EQ(full.exit_code, 1);
+      EXPECT_NE(full.text.find("p.pack.exr: write failed"), std::string::npos) << full.text;
+      EXPECT_NE(full.text.find("no space left on device"), std::string::npos) << full.text;
+      EXPECT_EQ(kept, "the previous pack");
+      EXPECT_EQ(left, 1) << "no temporary left";
+    } else {
+      std::printf("full-disk pack write not tried: cannot mount a small tmpfs here (needs root)\n");
+    }
+  }
+
   // A bad quantisation option names itself.
   Output bits = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
                        Path("b.pack.exr") + " --quantised --rho-bits 12");

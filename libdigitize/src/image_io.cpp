@@ -93,7 +93,7 @@ Status FinishFile(FILE* file, const fs::path& temp, const fs::path& path, int er
   std::error_code ec;
   const uintmax_t size = fs::file_size(temp, ec);
   if (ec) return Error{path.string() + ": write failed: " + ec.message()};
-  if (size == 0 || size != bytes)
+  if (size != bytes)
     return Error{path.string() + ": write failed: the file holds " + std::to_string(size) +
                  " bytes of " + std::to_string(bytes) + " written"};
   return Status::Ok();
@@ -106,8 +106,7 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     return Error{path.string() + ": cannot write an empty image (" + std::to_string(spec.width) +
                  "x" + std::to_string(spec.height) + ")"};
   }
-  return WriteImageAtomically(path, format, [&](OIIO::ImageOutput& out, const std::string& temp,
-                                                    OIIO::Filesystem::IOProxy*) -> Status {
+  auto write = [&](OIIO::ImageOutput& out, const std::string& temp) -> Status {
     if (!out.open(temp, spec))
       return Error{path.string() + ": cannot open for writing: " + OneLine(out.geterror())};
     const bool wrote = out.write_image(spec.format, pixels);
@@ -115,7 +114,8 @@ Status WritePixels(const fs::path& path, const char* format, const OIIO::ImageSp
     if (!wrote || !closed)
       return Error{path.string() + ": write failed: " + OneLine(out.geterror())};
     return Status::Ok();
-  });
+  };
+  return WriteImageAtomically(path, format, write);
 }
 
 OIIO::ImageSpec ExrSpec(int width, int height, const std::vector<std::string>& channels,
@@ -200,8 +200,7 @@ Status WriteAtomically(const fs::path& path,
 
 Status WriteImageAtomically(
     const fs::path& path, const char* format,
-    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp,
-                               OIIO::Filesystem::IOProxy* proxy)>& write) {
+    const std::function<Status(OIIO::ImageOutput& out, const std::string& temp)>& write) {
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
     auto out = OIIO::ImageOutput::create(format);
     if (!out) return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
@@ -211,10 +210,12 @@ Status WriteImageAtomically(
     if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
     CheckedFile proxy(file);
     Status status = out->set_ioproxy(&proxy)
-                        ? write(*out, temp.string(), &proxy)
+                        ? write(*out, temp.string())
                         : Status(Error{path.string() + ": cannot write through a checked file"});
     out.reset();  // a writer left open by a failed write closes here, before its file does
     Status finished = FinishFile(file, temp, path, proxy.error(), proxy.extent());
+    if (finished.ok() && status.ok() && proxy.extent() == 0)
+      return Error{path.string() + ": the " + format + " writer wrote nothing"};
     // The cause (a full disk) says more than the codec's view of it.
     return proxy.error() != 0 || status.ok() ? finished : status;
   });
@@ -339,6 +340,16 @@ Status WritePngRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& im
   CheckStorage(image);
   const OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
   return WritePixels(path, "png", spec, image.data.data());
+}
+
+Status WriteSrgbPng(const fs::path& path, int width, int height, int bits, const void* codes,
+                    int zlib_level) {
+  if (bits != 8 && bits != 16)
+    return Error{path.string() + ": PNG codes are 8 or 16 bits, got " + std::to_string(bits)};
+  OIIO::ImageSpec spec(width, height, 3, bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  spec.attribute("png:compressionLevel", zlib_level);
+  return WritePixels(path, "png", spec, codes);
 }
 
 Status WriteRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image) {

@@ -99,6 +99,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   FrameStats stats;
   int technique = int(options.technique);
   int frame = 0;
+  bool shot_failed = false;  // --window-shot not written: exit 1
   float exposure_ambient = float(options.ambient);
 
   while (!glfwWindowShouldClose(window)) {
@@ -214,8 +215,10 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
         for (int y = 0; y < h; ++y)
           for (int x = 0; x < w; ++x)
             for (int c = 0; c < 3; ++c) img(x, y)[c] = rgb[(size_t(h - 1 - y) * w + x) * 3 + c];
-        if (Status s = WritePngRgb8(window_shot, img); !s.ok())
+        if (Status s = WriteRgb8(window_shot, img); !s.ok()) {
           std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
+          shot_failed = true;
+        }
       }
       glfwSetWindowShouldClose(window, 1);
     }
@@ -227,7 +230,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   ImGui::DestroyContext();
   glfwDestroyWindow(window);
   glfwTerminate();
-  return 0;
+  return shot_failed ? 1 : 0;
 }
 
 }  // namespace
@@ -250,7 +253,7 @@ int main(int argc, char** argv) {
   app.add_flag("--shadows", shadows, "relief self-shadowing");
   app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
   app.add_option("--window-shot", window_shot,
-                 "window: write the last frame (panel included) here");
+                 "window: write the last frame (panel included) here (.png, .jpg, .tif, .exr)");
   CLI11_PARSE(app, argc, argv);
 
   RenderOptions options;

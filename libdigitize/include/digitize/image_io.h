@@ -55,6 +55,10 @@ Status WriteFloatExr(const std::filesystem::path& path, const Grid<std::array<fl
 Status WritePng8(const std::filesystem::path& path, const Grid<uint8_t>& image);
 // 8-bit RGB PNG (previews).
 Status WritePngRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image);
+// RGB PNG of 8- or 16-bit sRGB codes as given (`bits`; photos), tagged sRGB, zlib level
+// `zlib_level` (0-9).
+Status WriteSrgbPng(const std::filesystem::path& path, int width, int height, int bits,
+                    const void* codes, int zlib_level = 6);
 // The OpenImageIO format an output file's extension names (case-insensitive): .png "png",
 // .jpg/.jpeg "jpeg", .tif/.tiff "tiff", .exr "openexr"; any other is an error naming the file.
 Result<std::string> OutputFormatFor(const std::filesystem::path& path);
