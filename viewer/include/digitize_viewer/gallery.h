@@ -61,9 +61,15 @@ struct GalleryShotOptions {
   GalleryShotOptions() { render.ambient = 0.05; }
 };
 
+// The file image `index` of `count` is written to: out_png itself for a single image, else
+// out_png with _NNN before the extension (walk/shot.png -> walk/shot_000.png, ...).
+std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_t index,
+                                     size_t count);
+
 // Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
-// camera of `path` when given, written as out_png with _NNN before the extension) and writes
-// 8-bit sRGB PNGs. Errors: no GL context, a pack the renderer refuses (named), the PNG write.
+// camera of `path` when given, written to ScreenshotPath(out_png, i, path.size())) and writes
+// 8-bit sRGB PNGs, creating out_png's folder when missing. Errors: no GL context, a pack the
+// renderer refuses (named), the folder, the PNG write.
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path = {},
