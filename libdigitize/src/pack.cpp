@@ -854,6 +854,9 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   const Pack& p = *pack;
   v.checks.push_back("container: OpenEXR, 3 parts, version " + std::to_string(v.summary.version) +
                      ", " + ToString(v.summary.encoding) + " encoding");
+  // ReadPack refused the file unless its checksum matched; verify's output says it was checked.
+  v.checks.push_back("checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "
+                     "every decoded value");
   v.checks.push_back("values: " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");
