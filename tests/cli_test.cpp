@@ -6,7 +6,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -170,6 +173,11 @@ TEST_F(CliTest, DemoPrintsAccuracyAndWritesOutputs) {
   EXPECT_TRUE(fs::exists(Path("demo/scan/scan.exr")));
   // Issue 3: the demo fits the photos on the preprocessed canvas and judges held-out relighting.
   EXPECT_NE(out.text.find("held-out PSNR"), std::string::npos) << out.text;
+  // The region table: matte paint has no lobe to compare, said in words, not "nan".
+  EXPECT_NE(out.text.find("parameter errors by paint region"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("n/a (no lobe)"), std::string::npos) << out.text;
+  EXPECT_EQ(out.text.find("nan"), std::string::npos) << out.text;
+  EXPECT_EQ(out.text.find("//"), std::string::npos) << out.text;
   for (const char* f : {"fit/rho_d.exr", "fit/rho_s.exr", "fit/lobe.exr", "fit/fit_error.exr",
                         "fit/fit_status.png", "fit/report.json", "photos/calib.json"})
     EXPECT_TRUE(fs::exists(Path(std::string("demo/") + f))) << f;
@@ -229,6 +237,13 @@ TEST_F(CliTest, PackRunInspectVerify) {
   Output verify = RunCli("verify " + Path("p.pack.exr"));
   EXPECT_EQ(verify.exit_code, 0) << verify.text;
   EXPECT_NE(verify.text.find("valid"), std::string::npos) << verify.text;
+  // Every check `verify --help` promises is listed as done.
+  Output verify_help = RunCli("verify --help");
+  for (const char* check : {"header", "checksum", "boxes"}) {
+    EXPECT_NE(verify_help.text.find(check), std::string::npos) << check << "\n" << verify_help.text;
+    EXPECT_NE(verify.text.find("ok  " + std::string(check == std::string("header") ? "container" : check)),
+              std::string::npos) << check << "\n" << verify.text;
+  }
 
   // One go: scan + photos -> pack, with held-out PSNR from the written pack. --work names a
   // folder of the user's: only its canvas/ and fit/ are written, the rest stays.
@@ -714,6 +729,181 @@ TEST_F(CliTest, StaleTemporaryFoldersAreRemoved) {
   EXPECT_FALSE(fs::exists(dir_ / (".c.partial-" + pid + "-0")));
   EXPECT_FALSE(fs::exists(dir_ / (".c.old-" + pid + "-1")));
   EXPECT_TRUE(fs::exists(dir_ / (".c.partial-" + live + "-7"))) << "a running writer's";
+}
+
+// Help reads as documentation: no CLI11 internals (an enum map printed as "{ceres->,fast-> }").
+TEST_F(CliTest, HelpShowsChoicesInWords) {
+  Output demo = RunCli("demo --help");
+  ASSERT_EQ(demo.exit_code, 0) << demo.text;
+  const size_t at = demo.text.find("--fit-method");
+  ASSERT_NE(at, std::string::npos) << demo.text;
+  const std::string line = demo.text.substr(at, demo.text.find('\n', at) - at);
+  EXPECT_EQ(line.find("->"), std::string::npos) << line;
+  EXPECT_EQ(line.find("OR"), std::string::npos) << line;
+  EXPECT_NE(line.find("fast"), std::string::npos) << line;
+  EXPECT_NE(line.find("ceres"), std::string::npos) << line;
+  for (const char* cmd : {"synth", "preprocess", "fit", "pack", "run", "demo", "verify"}) {
+    Output help = RunCli(std::string(cmd) + " --help");
+    for (const char* internal : {"ENUM", "->,", "OR {"})
+      EXPECT_EQ(help.text.find(internal), std::string::npos) << cmd << "\n" << help.text;
+  }
+  // Wrong method: refused, named.
+  Output bad = RunCli("demo --out " + Path("d") + " --fit-method slow");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.text.find("slow"), std::string::npos) << bad.text;
+  EXPECT_FALSE(fs::exists(Path("d")));
+}
+
+// The percentages of "<title>: NN%" progress lines, in order.
+std::vector<int> ProgressPercents(const std::string& text, const std::string& title) {
+  std::vector<int> out;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind(title + ": ", 0) != 0) continue;
+    int percent = -1;
+    if (std::sscanf(line.c_str() + title.size() + 2, "%d%%", &percent) == 1) out.push_back(percent);
+  }
+  return out;
+}
+
+// Progress into a log file (not a terminal): lines with the real, rising percentages, also
+// inside the long render stage of `synth --photos` (once 27 % then 87 %, nothing between); and
+// an output folder given with a trailing slash is printed without a doubled one.
+TEST_F(CliTest, ProgressInALogRisesAndPathsHaveSingleSlashes) {
+  Output synth = RunCli("synth --out " + Path("s") + "/ --resolution 128 --scan-size 160 160 "
+                        "--photos --lights 16 --seed 7");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  const std::vector<int> p = ProgressPercents(synth.text, "synth");
+  ASSERT_GE(p.size(), 5u) << synth.text;
+  for (size_t i = 1; i < p.size(); ++i) EXPECT_GE(p[i], p[i - 1]) << synth.text;
+  int in_render = 0;  // the render stage spans 28 % .. 88 % of the bar
+  for (int v : p) in_render += v > 30 && v < 85;
+  EXPECT_GE(in_render, 3) << synth.text;
+  EXPECT_EQ(synth.text.find("//"), std::string::npos) << synth.text;
+  EXPECT_NE(synth.text.find(Path("s") + "/photos/"), std::string::npos) << synth.text;
+
+  Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c") + "//");
+  ASSERT_EQ(pre.exit_code, 0) << pre.text;
+  EXPECT_EQ(pre.text.find("//"), std::string::npos) << pre.text;
+  EXPECT_TRUE(fs::exists(Path("c/height.exr")));
+  Output fit = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
+                      " --out " + Path("f") + "/");
+  ASSERT_EQ(fit.exit_code, 0) << fit.text;
+  EXPECT_EQ(fit.text.find("//"), std::string::npos) << fit.text;
+  const std::vector<int> pf = ProgressPercents(fit.text, "fit");
+  ASSERT_GE(pf.size(), 3u) << fit.text;
+  EXPECT_GT(*std::max_element(pf.begin(), pf.end()), 50) << fit.text;
+}
+
+// Writes a 1-channel 16-bit PNG depth map (counts rising along x), for the reader's tests.
+void WriteDepthPng16(const std::string& path, int w, int h) {
+  std::vector<uint16_t> counts(static_cast<size_t>(w) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) counts[static_cast<size_t>(y) * w + x] = uint16_t(1000 + 37 * x + 11 * y);
+  auto out = OIIO::ImageOutput::create(path);
+  ASSERT_TRUE(out);
+  ASSERT_TRUE(out->open(path, OIIO::ImageSpec(w, h, 1, OIIO::TypeDesc::UINT16)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT16, counts.data()));
+  ASSERT_TRUE(out->close());
+}
+
+// A 16-bit depth PNG cut short (a copy interrupted): reported as truncated, not as an 8-bit image.
+TEST_F(CliTest, TruncatedDepthPngIsReportedAsTruncated) {
+  WriteDepthPng16(Path("depth.png"), 256, 256);
+  {
+    std::ifstream in(Path("depth.png"), std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    bytes.resize(bytes.size() / 2);
+    std::ofstream(Path("cut.png"), std::ios::binary) << bytes;
+  }
+  const std::string flags = " --pixel-pitch-mm 0.5 --height-scale-mm 0.001 --out ";
+  Output out = RunCli("preprocess " + Path("cut.png") + flags + Path("c"));
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("cut.png"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("truncated"), std::string::npos) << out.text;
+  EXPECT_EQ(out.text.find("8-bit"), std::string::npos) << out.text;
+  EXPECT_FALSE(fs::exists(Path("c")));
+}
+
+// `run` reads depth images as `preprocess` does, --height-offset-mm included.
+TEST_F(CliTest, RunTakesTheDepthFlagsOfPreprocess) {
+  Output help = RunCli("run --help");
+  for (const char* flag : {"--pixel-pitch-mm", "--height-scale-mm", "--height-offset-mm"})
+    EXPECT_NE(help.text.find(flag), std::string::npos) << flag;
+  // The value reaches the scan reader: an infinite offset is its error, not an unknown option.
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
+                        "--lights 8");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  WriteDepthPng16(Path("depth.png"), 64, 64);
+  Output out = RunCli("run " + Path("depth.png") + " --photos " + Path("s/photos/calib.json") +
+                      " --pixel-pitch-mm 0.5 --height-scale-mm 0.001 --height-offset-mm inf --out " +
+                      Path("p.pack.exr"));
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("height_offset_mm"), std::string::npos) << out.text;
+  EXPECT_FALSE(fs::exists(Path("p.pack.exr")));
+}
+
+// Writes an RTI capture of `n` flat grey 24x18 images (TIFF, with a resolution tag of
+// `per_inch` when > 0) and its .lp file; returns the .lp path.
+std::string WriteRtiCapture(const fs::path& dir, int n, float per_inch) {
+  fs::create_directories(dir);
+  std::ofstream lp(dir / "dirs.lp");
+  lp << n << "\n";
+  constexpr int w = 24, h = 18;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2 * 3.14159265358979 * i / n, elevation = 0.5 + 0.4 * (i % 3) / 2.0;
+    const double x = std::cos(a) * std::cos(elevation), y = std::sin(a) * std::cos(elevation),
+                 z = std::sin(elevation);
+    const std::string name = "img" + std::to_string(i) + ".tif";
+    // A Lambertian grey (rho 0.5) under this light, as 8-bit sRGB.
+    const double linear = 0.5 * z;
+    const double srgb = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
+    std::vector<uint8_t> px(w * h * 3, static_cast<uint8_t>(std::lround(255 * srgb)));
+    OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
+    if (per_inch > 0) {
+      spec.attribute("XResolution", per_inch);
+      spec.attribute("YResolution", per_inch);
+      spec.attribute("ResolutionUnit", "in");
+    }
+    auto out = OIIO::ImageOutput::create((dir / name).string());
+    EXPECT_TRUE(out && out->open((dir / name).string(), spec) &&
+                out->write_image(OIIO::TypeDesc::UINT8, px.data()) && out->close());
+    lp << name << " " << x << " " << y << " " << z << "\n";
+  }
+  return (dir / "dirs.lp").string();
+}
+
+// An RTI capture's physical size: from the images' resolution tags, else assumed and said so
+// (a warning, and the pack's provenance), and --rti-pitch-mm overrides both.
+TEST_F(CliTest, RtiPitchFromTagsOrSaidToBeAssumed) {
+  const std::string tagged = WriteRtiCapture(dir_ / "tagged", 12, 254.0f);  // 0.1 mm per pixel
+  Output run = RunCli("run --photos " + tagged + " --out " + Path("t.pack.exr"));
+  ASSERT_EQ(run.exit_code, 0) << run.text;
+  EXPECT_NE(run.text.find("RTI pixel pitch: 0.1 mm"), std::string::npos) << run.text;
+  EXPECT_NE(run.text.find("254 per inch"), std::string::npos) << run.text;
+  EXPECT_EQ(run.text.find("warning"), std::string::npos) << run.text;
+  auto j = InspectJson(Path("t.pack.exr"));
+  EXPECT_NEAR(j.value("pitch_mm", 0.0), 0.1, 1e-6) << j.dump();
+  EXPECT_EQ(j["provenance"]["options"]["fit"]["rti_pitch"].value("assumed", true), false);
+
+  const std::string bare = WriteRtiCapture(dir_ / "bare", 12, 0);
+  Output assumed = RunCli("run --photos " + bare + " --out " + Path("b.pack.exr"));
+  ASSERT_EQ(assumed.exit_code, 0) << assumed.text;
+  EXPECT_NE(assumed.text.find("warning: RTI pixel pitch 1 mm assumed"), std::string::npos)
+      << assumed.text;
+  EXPECT_NE(assumed.text.find("24 x 18 mm"), std::string::npos) << assumed.text;
+  EXPECT_NE(assumed.text.find("--rti-pitch-mm"), std::string::npos) << assumed.text;
+  j = InspectJson(Path("b.pack.exr"));
+  EXPECT_NEAR(j.value("pitch_mm", 0.0), 1.0, 1e-9);
+  EXPECT_EQ(j["provenance"]["options"]["fit"]["rti_pitch"].value("assumed", false), true);
+  Output fit = RunCli("fit --photos " + bare + " --out " + Path("f"));
+  ASSERT_EQ(fit.exit_code, 0) << fit.text;
+  EXPECT_NE(fit.text.find("assumed"), std::string::npos) << fit.text;
+
+  Output given = RunCli("run --photos " + tagged + " --rti-pitch-mm 0.25 --out " + Path("g.pack.exr"));
+  ASSERT_EQ(given.exit_code, 0) << given.text;
+  EXPECT_NE(given.text.find("RTI pixel pitch: 0.25 mm, given"), std::string::npos) << given.text;
+  EXPECT_NEAR(InspectJson(Path("g.pack.exr")).value("pitch_mm", 0.0), 0.25, 1e-6);
 }
 
 }  // namespace

@@ -125,7 +125,10 @@ TEST(RtiIconTest, ReadsTheRealCapture) {
   ASSERT_TRUE(set.ok()) << set.error().message;
   std::printf("rti_icon: %s (read in %.3f s)\n", set->summary.Brief().c_str(), seconds);
   EXPECT_TRUE(set->is_rti);
-  EXPECT_EQ(set->rti_pitch_mm, 1.0);
+  // Its JPEGs carry no resolution tag (oiiotool --info -v): the pitch is assumed, and said.
+  EXPECT_EQ(set->rti_pitch_mm, kRtiAssumedPitchMm);
+  EXPECT_TRUE(set->rti_pitch_assumed);
+  EXPECT_NE(set->rti_pitch_source.find("402 x 395 mm"), std::string::npos) << set->rti_pitch_source;
   ASSERT_EQ(set->photos.size(), 72u);
   EXPECT_EQ(set->summary.photos_loaded, 72);
   EXPECT_EQ(set->summary.srgb_photos, 72);
@@ -660,6 +663,62 @@ TEST_F(LpTest, ImagePathsOutsideTheCaptureFolderAreRefused) {
   PhotoSetOptions allow;
   allow.allow_outside_paths = true;
   EXPECT_TRUE(read("2\ni1.png 0 0 1\n../i2.png 0 0 1\n", allow).ok());
+}
+
+// An RTI capture's pixel pitch: given, else the first image's resolution tag (TIFF, JPEG JFIF,
+// PNG pHYs, as OpenImageIO reads them), else assumed and said.
+TEST_F(LpTest, PitchFromResolutionTagsElseSaidToBeAssumed) {
+  auto write_tagged = [&](const std::string& name, float per_unit, const char* unit) {
+    auto out = OIIO::ImageOutput::create(Path(name).string());
+    ASSERT_TRUE(out) << name;
+    OIIO::ImageSpec spec(8, 6, 3, OIIO::TypeDesc::UINT8);
+    spec.attribute("XResolution", per_unit);
+    spec.attribute("YResolution", per_unit);
+    spec.attribute("ResolutionUnit", unit);
+    const std::vector<uint8_t> px(8 * 6 * 3, 128);
+    ASSERT_TRUE(out->open(Path(name).string(), spec)) << out->geterror();
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data())) << out->geterror();
+    ASSERT_TRUE(out->close());
+  };
+  struct Case {
+    const char* name;
+    float per_unit;
+    const char* unit;
+    double mm;
+    double tol;  // PNG stores whole pixels per metre
+  };
+  for (const Case& c : {Case{"t.tif", 300, "in", 25.4 / 300, 1e-9},
+                        Case{"t.jpg", 40, "cm", 10.0 / 40, 1e-9},
+                        Case{"t.png", 600, "in", 25.4 / 600, 1e-4 * 25.4 / 600}}) {
+    write_tagged(c.name, c.per_unit, c.unit);
+    auto set = ReadLp(std::string("2\n") + c.name + " 0 0 1\ni1.png 0.6 0 0.8\n");
+    ASSERT_TRUE(set.ok()) << set.error().message;
+    EXPECT_NEAR(set->rti_pitch_mm, c.mm, c.tol) << c.name;
+    EXPECT_FALSE(set->rti_pitch_assumed) << c.name;
+    EXPECT_NE(set->rti_pitch_source.find(c.name), std::string::npos) << set->rti_pitch_source;
+    EXPECT_NEAR(set->photos[1].camera.pixel_pitch_mm, c.mm, c.tol) << "one camera for all photos";
+    auto flat = FlatCanvasForRti(*set);
+    ASSERT_TRUE(flat.ok());
+    EXPECT_NEAR(flat->pitch_mm, c.mm, c.tol);
+  }
+  // Given: overrides the tag.
+  PhotoSetOptions given;
+  given.rti_pixel_pitch_mm = 0.5;
+  WriteText("dirs.lp", "2\nt.tif 0 0 1\ni1.png 0.6 0 0.8\n");
+  auto set = ReadRtiCapture(Path("dirs.lp"), given);
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  EXPECT_EQ(set->rti_pitch_mm, 0.5);
+  EXPECT_FALSE(set->rti_pitch_assumed);
+  EXPECT_NE(set->rti_pitch_source.find("given"), std::string::npos) << set->rti_pitch_source;
+  // No tag on the first image: assumed, with the size it makes up.
+  set = ReadLp("2\ni1.png 0 0 1\nt.tif 0.6 0 0.8\n");
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  EXPECT_EQ(set->rti_pitch_mm, kRtiAssumedPitchMm);
+  EXPECT_TRUE(set->rti_pitch_assumed);
+  EXPECT_NE(set->rti_pitch_source.find("8 x 6 mm"), std::string::npos) << set->rti_pitch_source;
+  // A negative or non-finite pitch is refused by name.
+  given.rti_pixel_pitch_mm = -1;
+  ExpectError(ReadRtiCapture(Path("dirs.lp"), given), {"rti_pixel_pitch_mm"});
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -156,7 +156,7 @@ TEST_F(UntrustedPackTest, ForgedPitchIsRefusedByVerifyAndInspect) {
   }
 }
 
-#ifdef DIGITIZE_VIEWER_APP
+#ifdef DIGITIZE_VIEWER
 // The viewer never aborts on a shared pack: the forged one fails to load, a 1-texel-wide one
 // (valid, but nothing the renderer can hang) fails to hang; both are listed on stderr and the
 // good pack is rendered.
@@ -175,7 +175,7 @@ TEST_F(UntrustedPackTest, ViewerListsFailedPacksAndRendersTheOthers) {
   const fs::path thin = dir_ / "thin.pack.exr";
   ASSERT_TRUE(WritePack(thin, line).ok()) << WritePack(thin, line).message();
   const fs::path png = dir_ / "shot.png";
-  const Output o = RunProgram(DIGITIZE_VIEWER_APP,
+  const Output o = RunProgram(DIGITIZE_VIEWER,
                        Quote(forged) + " " + Quote(good) + " " + Quote(thin) + " --screenshot " +
                            Quote(png) + " --size 96x64",
                        dir_);
@@ -190,7 +190,7 @@ TEST_F(UntrustedPackTest, ViewerRefusesScreenshotSizesTheGlCannotRender) {
   for (const char* size : {"100000x100000", "20000x100"}) {
     SCOPED_TRACE(size);
     const fs::path png = dir_ / "huge.png";
-    const Output o = RunProgram(DIGITIZE_VIEWER_APP,
+    const Output o = RunProgram(DIGITIZE_VIEWER,
                          "--synthetic --screenshot " + Quote(png) + " --size " + size, dir_);
     EXPECT_EQ(o.exit_code, 1) << o.err;
     EXPECT_NE(o.err.find(std::string("a ") + size + " image is larger than this OpenGL's maximum"),

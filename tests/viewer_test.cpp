@@ -358,6 +358,73 @@ TEST(ViewerTest, InconsistentPackIsReported) {
   EXPECT_EQ(Get().renderer->painting_count(), 1);
 }
 
+// A scanned canvas's mask has a jagged outline inside the pack's grid rectangle (texels outside
+// the canvas), and edge texels fitted from too few samples hold zero maps. The bump plane and the
+// mesh cover the whole rectangle: those texels must not be relit black (the black outline once
+// seen round every painting in the gallery). A uniformly bright flat painting, face on and close:
+// no near-black pixel anywhere inside its rectangle, in every technique.
+TEST(ViewerTest, NoBlackOutlineWhereTheMaskOrTheFitEnds) {
+  REQUIRE_GL();
+  constexpr int w = 64, h = 48;
+  Pack p;
+  p.field.height_mm = Grid<float>(w, h, 0.0f);
+  p.field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
+  p.field.pitch_mm = 1.0;
+  p.normals = Grid<Vec3f>(w, h, Vec3f::UnitZ());
+  p.maps = ReflectanceMaps::Zeros(w, h);
+  p.delta0_mm = 0.01;
+  p.max_height_mm = 0.02;
+  p.cell_px = 16;
+  size_t outside = 0, unfitted = 0;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      // A notched border 0-3 texels deep (as a dropout-ridden scan's mask), and a second ring of
+      // texels the fit could not constrain: both keep the zero maps a fit leaves there.
+      const int depth = std::min(std::min(x, w - 1 - x), std::min(y, h - 1 - y));
+      const int notch = (x * 7 + y * 3) % 4;
+      if (depth < notch) {
+        p.field.state(x, y) = TexelState::kOutside;
+        ++outside;
+      } else if (depth == notch && (x + y) % 2 == 0) {
+        ++unfitted;  // status stays kTooFewSamples
+      } else {
+        p.maps.rho_d(x, y) = Vec3f::Constant(0.8f / 3.14159265f);
+        p.maps.status(x, y) = TexelFitStatus::kDiffuseOnly;
+      }
+    }
+  }
+  ASSERT_GT(outside, 50u);
+  ASSERT_GT(unfitted, 20u);
+  auto renderer = Renderer::Create();
+  ASSERT_TRUE(renderer.ok()) << renderer.error().message;
+  ASSERT_TRUE((*renderer)->AddPainting(p, "notched").ok());
+  ViewCamera view;
+  view.eye_mm = Vec3d(w / 2.0, h / 2.0, 80);
+  view.target_mm = Vec3d(w / 2.0, h / 2.0, 0);
+  view.up = Vec3d::UnitY();
+  view.width = 160;
+  view.height = 120;
+  const Camera cam = ToCamera(view);
+  const Eigen::Vector2d a = cam.Project(Vec3d(0, h, 0)), b = cam.Project(Vec3d(w, 0, 0));
+  const double u0 = std::min(a.x(), b.x()) + 1.5, u1 = std::max(a.x(), b.x()) - 1.5;
+  const double v0 = std::min(a.y(), b.y()) + 1.5, v1 = std::max(a.y(), b.y()) - 1.5;
+  ASSERT_GT(u1 - u0, 100);  // the canvas fills most of the image: 2+ pixels per texel
+  for (Technique t : {Technique::kMesh, Technique::kBump, Technique::kHybridAdaptive}) {
+    const Grid<Vec3f> img = (*renderer)->Render(view, {StandardLight(p)}, Options(t)).rgb;
+    MaybeSave(img, std::string("notched_") + ToString(t));
+    size_t inside = 0, black = 0;
+    for (int v = int(std::ceil(v0)); v <= int(v1); ++v) {
+      for (int u = int(std::ceil(u0)); u <= int(u1); ++u) {
+        ++inside;
+        black += img(u, v).maxCoeff() < 0.1f;  // the painting reads ~0.6-0.8 here
+      }
+    }
+    EXPECT_GT(inside, 10000u);
+    EXPECT_EQ(black, 0u) << ToString(t) << ": " << black << " near-black pixels of " << inside
+                         << " inside the canvas rectangle";
+  }
+}
+
 // Self-shadowing: with shadows on, the viewer's relief modes match the reference with shadows on
 // (same 35 dB bar on 4 x 4 box-filtered images) and are darker than without (shadows appear).
 TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {

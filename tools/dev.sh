@@ -103,7 +103,8 @@ case "$cmd" in
   demo)
     install_packages
     configure build -DCMAKE_BUILD_TYPE=Release
-    cmake --build build -j "$jobs" --target digitize_cli  # the demo needs the tool only
+    # The tool, and the viewer the README's next commands open the demo's pack with.
+    cmake --build build -j "$jobs" --target digitize_cli digitize_viewer_app
     shift
     ./build/bin/digitize demo "$@"
     ;;

@@ -3,13 +3,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 
 namespace digitize::synth {
 namespace {
 
 double Median(std::vector<double>& v) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  if (v.empty()) return 0;  // no such texels: the flags (is_measured, has_lobe) say so
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), mid, v.end());
   return *mid;
@@ -64,6 +63,7 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
     e.name = truth.materials[m].name;
     e.is_measured = truth.materials[m].is_measured;
     e.texels = count[m];
+    e.has_lobe = !logk[m].empty();
     e.rho_d_rel_median = Median(rho_d[m]);
     e.spec_albedo_abs_median = Median(albedo[m]);
     e.log10_k_abs_median = Median(logk[m]);
@@ -82,11 +82,15 @@ std::string FormatReflectanceAccuracy(const std::vector<RegionReflectanceError>&
       std::snprintf(b, sizeof b, "  %-22s %8zu texels  (measured 3-lobe: no one-lobe truth)\n",
                     e.name.c_str(), e.texels);
     } else {
+      char lobe[64] = "|log10 k| n/a (no lobe)";  // matte paint: no true k or direction
+      if (e.has_lobe)
+        std::snprintf(lobe, sizeof lobe, "|log10 k| %.3f  |dc| %.3f", e.log10_k_abs_median,
+                      e.lobe_abs_median);
       std::snprintf(b, sizeof b,
-                    "  %-22s %8zu texels  rho_d %5.1f %%  spec. albedo +-%.4f  |log10 k| %.3f  "
-                    "|dc| %.3f  diffuse-only %4.1f %%\n",
+                    "  %-22s %8zu texels  rho_d %5.1f %%  spec. albedo +-%.4f  %s  diffuse-only "
+                    "%4.1f %%\n",
                     e.name.c_str(), e.texels, 100.0 * e.rho_d_rel_median, e.spec_albedo_abs_median,
-                    e.log10_k_abs_median, e.lobe_abs_median, 100.0 * e.diffuse_only_share);
+                    lobe, 100.0 * e.diffuse_only_share);
     }
     out += b;
   }

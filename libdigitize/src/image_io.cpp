@@ -9,6 +9,7 @@
 
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
@@ -415,6 +416,17 @@ Result<ImageHeader> ReadImageHeader(const fs::path& path) {
   header.channels = spec.nchannels;
   header.integer_samples = IsIntegerType(spec.format);
   header.format = (*in)->format_name();
+  const float per_unit = spec.get_float_attribute("XResolution", 0.0f);
+  const std::string unit = spec.get_string_attribute("ResolutionUnit");
+  const double unit_mm = unit == "in" || unit == "inch" ? 25.4
+                         : unit == "cm"                 ? 10.0
+                         : unit == "mm"                 ? 1.0
+                         : unit == "m"                  ? 1000.0
+                                                        : 0.0;
+  if (std::isfinite(per_unit) && per_unit > 0 && unit_mm > 0) {
+    header.mm_per_pixel = unit_mm / per_unit;
+    header.resolution_tag = FormatNumber(per_unit) + " per " + (unit == "in" ? "inch" : unit);
+  }
   (*in)->close();
   return header;
 }

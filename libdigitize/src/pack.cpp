@@ -933,6 +933,9 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
                      Num(kMaxPackExtentMm / 1000) + " m), heights, H and delta0 within " +
                      Num(kMaxPackHeightMm) + " mm, canvas_from_scan a rotation within " +
                      Num(kMaxPackTranslationMm / 1000) + " m");
+  // ReadPack refused the file unless its checksum matched; verify's output says it was checked.
+  v.checks.push_back("checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "
+                     "every decoded value");
   v.checks.push_back("values: " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");

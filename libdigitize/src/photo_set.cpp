@@ -812,8 +812,9 @@ Status PhotoSetOptions::Validate() const {
     return Error{"max_non_finite_fraction must be in [0, 1], got " + Num(max_non_finite_fraction)};
   }
   if (max_pixels_per_image == 0) return Error{"max_pixels_per_image must be > 0"};
-  if (!(std::isfinite(rti_pixel_pitch_mm) && rti_pixel_pitch_mm > 0)) {
-    return Error{"rti_pixel_pitch_mm must be > 0 mm, got " + Num(rti_pixel_pitch_mm)};
+  if (!(std::isfinite(rti_pixel_pitch_mm) && rti_pixel_pitch_mm >= 0)) {
+    return Error{"rti_pixel_pitch_mm must be > 0 mm (or 0: from the images), got " +
+                 Num(rti_pixel_pitch_mm)};
   }
   if (!(std::isfinite(rti_camera_distance_mm) && rti_camera_distance_mm > 0)) {
     return Error{"rti_camera_distance_mm must be > 0 mm, got " + Num(rti_camera_distance_mm)};
@@ -994,10 +995,12 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
   PhotoSet set;
   set.source = lp_path;
   set.is_rti = true;
-  set.rti_pitch_mm = options.rti_pixel_pitch_mm;
 
-  // The first image fixes the grid; the camera looks straight down at the canvas centre.
+  // The first image fixes the grid and the pitch; the camera looks straight down at the canvas
+  // centre.
   int width = 0, height = 0;
+  double tagged_mm_per_pixel = 0;
+  std::string tag;
   for (const RtiLightEntry& e : *entries) {
     Photo photo;
     photo.entry = lp_path.string() + ", line " + std::to_string(e.line);
@@ -1009,6 +1012,8 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
     if (width == 0) {
       width = header->width;
       height = header->height;
+      tagged_mm_per_pixel = header->mm_per_pixel;
+      tag = photo.path.filename().string() + "'s resolution tag (" + header->resolution_tag + ")";
     } else if (header->width != width || header->height != height) {
       return Error{photo.entry + ": " + photo.path.string() + ": image is " +
                    Size(header->width, header->height) + ", the first image (" +
@@ -1020,11 +1025,24 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
     photo.light.irradiance = Vec3f::Ones();
     set.photos.push_back(std::move(photo));
   }
+  if (options.rti_pixel_pitch_mm > 0) {
+    set.rti_pitch_mm = options.rti_pixel_pitch_mm;
+    set.rti_pitch_source = "given (rti_pixel_pitch_mm)";
+  } else if (tagged_mm_per_pixel > 0 && std::isfinite(tagged_mm_per_pixel)) {
+    set.rti_pitch_mm = tagged_mm_per_pixel;
+    set.rti_pitch_source = "from " + tag;
+  } else {
+    set.rti_pitch_mm = kRtiAssumedPitchMm;
+    set.rti_pitch_assumed = true;
+    set.rti_pitch_source = "assumed: the images have no resolution tag, so the physical size (" +
+                           Num(width * kRtiAssumedPitchMm) + " x " +
+                           Num(height * kRtiAssumedPitchMm) + " mm) is made up";
+  }
   Camera camera;
   camera.model = CameraModel::kOrthographic;
   camera.width = width;
   camera.height = height;
-  camera.pixel_pitch_mm = options.rti_pixel_pitch_mm;
+  camera.pixel_pitch_mm = set.rti_pitch_mm;
   // Pixel (u, v) centre <-> texel centre X = (u + 0.5) p, Y = (H - v - 0.5) p (height_field.h):
   // camera x = X - W p / 2, y = H p / 2 - Y, z = d - Z, principal point at the image centre.
   camera.cx = (width - 1) / 2.0;

@@ -1,6 +1,5 @@
 #include <cstdio>
 #include <algorithm>
-#include <map>
 #include <memory>
 #include <optional>
 
@@ -32,6 +31,7 @@ struct DemoArgs {
   bool measured = false;
   bool no_fit = false;
   ReflectanceFitOptions fit;
+  std::string fit_method = "fast";  // as `fit --method`
   PackWriteOptions quantised;  // the second, smaller pack (encoding set to kQuantised)
 };
 
@@ -60,6 +60,8 @@ int RunDemo(const DemoArgs& args) {
   photo_options.seed = args.seed;
   if (Status s = photo_options.Validate(); !s.ok()) return Fail(cmd, s.message());
   ReflectanceFitOptions fit_options = args.fit;
+  fit_options.fit.method =
+      args.fit_method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
   // The fit's noise level is the photos' (linear units; 8-bit quantisation adds ~0.001).
   fit_options.fit.noise_sigma = std::max(photo_options.noise_sigma, 0.001);
   if (Status s = fit_options.Validate(); !s.ok()) return Fail(cmd, s.message());
@@ -238,7 +240,7 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
       "against the ground truth");
   c->add_option("-o,--out", args->out,
                 "Output folder: new, empty, or an earlier demo output (replaced only on success)")
-      ->capture_default_str();
+      ->capture_default_str()->transform(FolderPath());
   c->add_option("--resolution", args->resolution,
                 "Painting texels along the long side (0 = matched to the scan's sampling)")
       ->capture_default_str();
@@ -256,11 +258,10 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
               "Paint one region with a measured 3-lobe paint (not in the fitted model)")
       ->group("Photos");
   c->add_flag("--no-fit", args->no_fit, "Stop after preprocessing")->group("Photos");
-  const std::map<std::string, BrdfFitMethod> methods = {
-      {"fast", BrdfFitMethod::kFast}, {"ceres", BrdfFitMethod::kCeresReference}};
-  c->add_option("--fit-method", args->fit.fit.method,
+  c->add_option("--fit-method", args->fit_method,
                 "fast (variable projection) or ceres (ceres::Solve reference)")
-      ->transform(CLI::CheckedTransformer(methods, CLI::ignore_case))->group("Fit");
+      ->check(CLI::IsMember({"fast", "ceres"}, CLI::ignore_case))->capture_default_str()
+      ->group("Fit");
   c->callback([args, &exit_code] { exit_code = RunDemo(*args); });
 }
 

@@ -36,6 +36,15 @@ Result<PhotoSet> ReadPhotoSetFile(const std::string& path, const PhotoSetOptions
   return ReadCalibration(p, o, progress);
 }
 
+void PrintRtiPitch(const std::string& command, const PhotoSet& set) {
+  if (!set.is_rti) return;
+  if (set.rti_pitch_assumed)
+    std::fprintf(stderr, "digitize %s: warning: RTI pixel pitch %g mm %s; give --rti-pitch-mm\n",
+                 command.c_str(), set.rti_pitch_mm, set.rti_pitch_source.c_str());
+  else
+    std::printf("RTI pixel pitch: %g mm, %s\n", set.rti_pitch_mm, set.rti_pitch_source.c_str());
+}
+
 int RunFit(FitArgs args) {
   const std::string cmd = "fit";
   args.options.fit.method = args.method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
@@ -97,6 +106,7 @@ int RunFit(FitArgs args) {
   if (!written.ok()) return Fail(cmd, written.message());
   for (const std::string& w : result->report.Warnings()) Warn(cmd, w);
   std::printf("photos: %s\n", set->summary.Brief().c_str());
+  PrintRtiPitch(cmd, *set);
   std::printf("samples: %s\n", result->report.samples.Brief().c_str());
   if (result->report.dark_outliers > 0)
     std::printf("unmodelled shadows: %zu dark samples removed, %zu texels refitted\n",
@@ -120,7 +130,7 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
       ->check(CLI::ExistingDirectory);
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier fit output (replaced only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier fit output (replaced only on success)")->required()->transform(FolderPath());
   c->add_option("--held-out", args->held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
       ->check(CLI::ExistingFile);
@@ -156,7 +166,8 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
                 "Encoded level (0..1) at or above which an 8/16-bit channel is saturated")
       ->capture_default_str()->group("Photos");
   c->add_option("--rti-pitch-mm", args->photo.rti_pixel_pitch_mm,
-                "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+                "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
+                "else 1 mm with a warning)")->group("Photos");
   c->add_flag("--allow-outside-paths", args->photo.allow_outside_paths,
               "Read images the calibration / .lp names outside its folder (.., absolute paths, "
               "symbolic links); refused by default: a shared capture must not open other files")

@@ -119,7 +119,7 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
                 "Scan file(s): float EXR/TIFF (XYZ mm, or depth with --pixel-pitch-mm), 16-bit "
                 "PNG/TIFF (with --height-scale-mm), PLY point grid")
       ->required()->check(CLI::ExistingFile);
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier canvas output (replaced only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier canvas output (replaced only on success)")->required()->transform(FolderPath());
   c->add_option("--mask", args->mask, "Mask image, same size as the scan; 0 = missing sample")
       ->check(CLI::ExistingFile)->group("Input");
   c->add_option("--pixel-pitch-mm", args->read.pixel_pitch_mm,

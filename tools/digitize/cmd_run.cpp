@@ -128,6 +128,10 @@ int Run(RunArgs args) {
       {"fit", nlohmann::json::parse(OptionsOf(ReflectanceReportJson(*fit, fa.options, photo_inputs)),
                                     nullptr, false)},
       {"pack", nlohmann::json::parse(PackOptionsJson(args.pack))}};
+  if (set->is_rti)  // the pack's physical size rests on it: the provenance says where it came from
+    options["fit"]["rti_pitch"] = {{"mm", set->rti_pitch_mm},
+                                   {"source", set->rti_pitch_source},
+                                   {"assumed", set->rti_pitch_assumed}};
   provenance.options_json = options.dump();
 
   if (!args.work.empty()) {
@@ -161,6 +165,7 @@ int Run(RunArgs args) {
     for (const StepReport& step : preprocessed->steps)
       std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf("photos: %s\n", set->summary.Brief().c_str());
+  PrintRtiPitch(cmd, *set);
   std::printf("samples: %s\n", fit->report.samples.Brief().c_str());
   std::printf("fit: %s\n", fit->report.Brief().c_str());
   if (score) std::printf("from the pack: %s\n", score->Brief().c_str());
@@ -186,7 +191,7 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
   c->add_option("-o,--out", args->out, "Pack file to write (replaced only on success)")->required();
   c->add_option("--work", args->work,
                 "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
-                "subfolders are replaced, each when new, empty or an earlier output of its kind)");
+                "subfolders are replaced, each when new, empty or an earlier output of its kind)")->transform(FolderPath());
   c->add_option("--held-out", args->fit.held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
       ->check(CLI::ExistingFile);
@@ -194,6 +199,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
                 "Sample spacing (mm) of depth-only scans")->group("Input");
   c->add_option("--height-scale-mm", args->preprocess.read.height_scale_mm,
                 "mm per count for 16-bit depth images")->group("Input");
+  c->add_option("--height-offset-mm", args->preprocess.read.height_offset_mm,
+                "Added to 16-bit depth after scaling (mm)")->group("Input");
   c->add_option("--mask", args->preprocess.mask, "Scan mask image; 0 = missing sample")
       ->check(CLI::ExistingFile)->group("Input");
   c->add_option("--grid", args->preprocess.grid, "WIDTH HEIGHT of a PLY point grid")
@@ -209,7 +216,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
                     "Samples below this share of the diffuse floor are unmodelled shadows")
           ->capture_default_str()->group("Fit");
   c->add_option("--rti-pitch-mm", args->fit.photo.rti_pixel_pitch_mm,
-                "RTI captures: canvas mm per image pixel")->capture_default_str()->group("Photos");
+                "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
+                "else 1 mm with a warning)")->group("Photos");
   c->add_flag("--allow-outside-paths", args->fit.photo.allow_outside_paths,
               "Read images the calibration / .lp names outside its folder (.., absolute paths, "
               "symbolic links); refused by default: a shared capture must not open other files")

@@ -98,7 +98,7 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<SynthArgs>();
   CLI::App* c = app.add_subcommand(
       "synth", "Generate a synthetic framed painting, its scan, and the ground truth beside it");
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier synth output (replaced only on success)")->required();
+  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier synth output (replaced only on success)")->required()->transform(FolderPath());
   auto& p = args->painting;
   c->add_option("--seed", p.seed, "Random seed (same seed, same data)")->capture_default_str();
   c->add_option("--width-mm", p.width_mm, "Canvas width (mm)")->capture_default_str()->group("Painting");

@@ -50,6 +50,9 @@ int RunFit(FitArgs args);
 // A calibration JSON or, by its .lp extension, an RTI capture (fit, run).
 Result<PhotoSet> ReadPhotoSetFile(const std::string& path, const PhotoSetOptions& options,
                                   const ProgressCallback& progress);
+// For an RTI capture: its pixel pitch and where it came from, on stdout; a warning on stderr
+// when it was assumed (the physical size is then made up). Nothing for a calibration.
+void PrintRtiPitch(const std::string& command, const PhotoSet& set);
 // The scans of `args`, read with its input flags (preprocess, run). Errors name the file or flag.
 Result<std::vector<Scan>> ReadScans(const PreprocessArgs& args);
 // The pack's write options as the provenance records them (pack, run, demo).
@@ -65,6 +68,17 @@ int PackFromFolders(const std::string& command, const std::string& canvas_dir,
 
 // Flags for every preprocessing threshold (shared by preprocess, demo and later run).
 void AddPreprocessFlags(CLI::App* command, PreprocessOptions& options);
+
+// Transform of a folder option: the value without trailing slashes ("synth/" -> "synth"; "/"
+// stays), so that printed paths read "synth/scan.exr", not "synth//scan.exr".
+inline CLI::Validator FolderPath() {
+  return CLI::Validator(
+      [](std::string& path) {
+        while (path.size() > 1 && path.back() == '/') path.pop_back();
+        return std::string();
+      },
+      "");
+}
 
 // Prints "digitize <command>: error: <message>" on stderr and returns 1.
 int Fail(const std::string& command, const std::string& message);

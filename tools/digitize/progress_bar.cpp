@@ -26,9 +26,17 @@ void ProgressBar::Update(std::string_view step, double fraction) {
                  "##############################", kWidth - filled, "", percent, seconds,
                  static_cast<int>(std::min<size_t>(step.size(), 24)), step.data());
     std::fflush(stderr);
-  } else if (step != last_step_) {
-    std::fprintf(stderr, "%s: %3d%% %5.1fs %.*s\n", title_.c_str(), percent, seconds,
-                 static_cast<int>(step.size()), step.data());
+  } else {
+    // A log file: a line when the step changes, then every kLogPercent or kLogSeconds of
+    // progress, whichever comes first (a bar redrawn in place would leave one line at 0 %).
+    const bool due = step != last_step_ || percent >= logged_percent_ + kLogPercent ||
+                     (percent > logged_percent_ && seconds >= logged_seconds_ + kLogSeconds);
+    if (due) {
+      std::fprintf(stderr, "%s: %3d%% %5.1fs %.*s\n", title_.c_str(), percent, seconds,
+                   static_cast<int>(step.size()), step.data());
+      logged_percent_ = percent;
+      logged_seconds_ = seconds;
+    }
   }
   last_percent_ = percent;
   last_step_ = std::string(step);

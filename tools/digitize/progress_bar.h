@@ -1,5 +1,5 @@
-// A progress bar on stderr for the command line: redrawn in place on a terminal, one line per
-// step otherwise (logs, CI).
+// A progress bar on stderr for the command line: redrawn in place on a terminal; otherwise (logs,
+// CI) one line per step and then every 10 % or 5 s of it, whichever comes first.
 #pragma once
 
 #include <chrono>
@@ -25,6 +25,10 @@ class ProgressBar {
   bool tty_ = false;
   bool finished_ = false;
   int last_percent_ = -1;
+  static constexpr int kLogPercent = 10;
+  static constexpr double kLogSeconds = 5.0;
+  int logged_percent_ = -1;  // the last line written to a log, and when
+  double logged_seconds_ = 0;
   std::chrono::steady_clock::time_point start_;
 };
 

@@ -17,6 +17,7 @@
 #include <imgui_impl_opengl3.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -67,6 +68,9 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   glfwSwapInterval(0);
   IMGUI_CHECKVERSION();
   ImGui::CreateContext();
+  // No imgui.ini: the viewer writes nothing into the user's folder, and the panel starts the
+  // same way every time.
+  ImGui::GetIO().IniFilename = nullptr;
   ImGui_ImplGlfw_InitForOpenGL(window, true);
   ImGui_ImplOpenGL3_Init("#version 450");
 
@@ -165,7 +169,12 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
+    // Collapsed at start (a title bar that opens it), so the first painting is seen whole;
+    // open when a pack failed to load, to show why.
+    ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
     ImGui::SetNextWindowSize(ImVec2(440, 620), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowCollapsed(errors.empty(), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowBgAlpha(0.75f);
     ImGui::Begin("digitize viewer");
     ImGui::Text("%.1f ms/frame (%.0f Hz)", frame_ms, 1000.0 / std::max(frame_ms, 1e-3));
     ImGui::Text("boxes drawn %d of %d (%d blended)", stats.boxes_drawn, stats.boxes_total,
@@ -268,6 +277,12 @@ int main(int argc, char** argv) {
   options.show_boxes = show_boxes;
   options.shadows = shadows;
 
+  if (paths.empty() && !synthetic) {
+    std::fprintf(stderr,
+                 "digitize-viewer: no pack given; usage: digitize-viewer PAINTING.pack.exr [...], "
+                 "or digitize-viewer --synthetic for a synthetic painting (--help for more)\n");
+    return 1;
+  }
   std::vector<std::pair<std::string, Pack>> packs;
   std::vector<std::string> errors;
   for (const std::string& p : paths) {
@@ -279,13 +294,18 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "digitize-viewer: %s\n", pack.error().message.c_str());
     }
   }
-  if (synthetic || paths.empty()) {
+  if (synthetic) {
     synth::PaintingOptions po;
     po.resolution_px = 768;
     po.impasto_count = 24;
     synth::TruthPackOptions tpo;
     tpo.relief.delta0_fraction = 0.10;
     packs.emplace_back("synthetic", synth::MakeTruthPack(synth::MakePainting(po), tpo));
+  }
+  if (packs.empty()) {  // an empty room would hide that nothing could be read
+    std::fprintf(stderr, "digitize-viewer: none of the %zu pack(s) could be loaded; nothing shown "
+                 "or written\n", paths.size());
+    return 1;
   }
 
   const bool has_display = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
@@ -316,8 +336,13 @@ int main(int argc, char** argv) {
     }
     for (size_t i = loaded; i < errors.size(); ++i)
       std::fprintf(stderr, "digitize-viewer: %s\n", errors[i].c_str());
-    std::printf("wrote %s (%zu painting(s), %zu failed to load)\n", screenshot.c_str(),
-                packs.size() - (errors.size() - loaded), errors.size());
+    const size_t frames = std::max<size_t>(path.size(), 1);
+    std::printf("wrote %s", ScreenshotPath(screenshot, 0, frames).c_str());
+    if (frames > 1)
+      std::printf(" .. %s (%zu images)", ScreenshotPath(screenshot, frames - 1, frames).c_str(),
+                  frames);
+    std::printf(" (%zu painting(s), %zu failed to load)\n", packs.size() - (errors.size() - loaded),
+                errors.size());
     return errors.empty() ? 0 : 1;
   }
   return RunWindow(packs, errors, options, window_frames, window_shot);

@@ -63,6 +63,15 @@ Result<std::vector<ViewCamera>> ReadCameraPath(const std::filesystem::path& path
   }
 }
 
+std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_t index,
+                                     size_t count) {
+  if (count <= 1) return out_png;
+  char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
+  std::snprintf(suffix, sizeof(suffix), "_%03zu", index);
+  return out_png.parent_path() /
+         (out_png.stem().string() + suffix + out_png.extension().string());
+}
+
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path,
@@ -71,13 +80,7 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   const size_t shots = std::max<size_t>(path.size(), 1);
   std::vector<std::filesystem::path> outs;
   for (size_t i = 0; i < shots; ++i) {
-    std::filesystem::path out = out_png;
-    if (shots > 1) {
-      char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
-      std::snprintf(suffix, sizeof(suffix), "_%03zu", i);
-      out =
-          out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
-    }
+    std::filesystem::path out = ScreenshotPath(out_png, i, shots);
     if (auto format = OutputFormatFor(out); !format.ok()) return Status(format.error());
     if (Status s = CheckOutputPath(out, options.inputs); !s.ok()) return s;
     outs.push_back(std::move(out));
@@ -99,6 +102,12 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     failed->insert(failed->end(), refused.begin(), refused.end());
   }
   (*renderer)->SetSceneBoxes(g.boxes);
+  // As every other command: a missing output folder is made (only now, when all is ready).
+  if (const std::filesystem::path dir = out_png.parent_path(); !dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) return Error{dir.string() + ": cannot create the screenshot folder: " + ec.message()};
+  }
   std::vector<ViewCamera> cameras = path;
   if (cameras.empty()) {
     ViewCamera c = g.start;

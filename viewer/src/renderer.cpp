@@ -43,6 +43,35 @@ Mat4d ClipFromWorld(const ViewCamera& view) {
   return p * Homogeneous(cam.camera_from_scan);
 }
 
+// For each texel, the texel whose reflectance it is shaded with: itself when it is inside the
+// canvas and was fitted, else the nearest such texel (4-connected, breadth first). The bump
+// plane and the mesh cover the whole grid rectangle, so texels outside the mask's jagged outline,
+// or fitted from too few samples (zero maps), would otherwise be relit black: a black outline
+// round every scanned canvas. SIZE_MAX everywhere when no texel was fitted.
+std::vector<size_t> ShadingSource(const Pack& pack) {
+  const int w = pack.width(), h = pack.height();
+  std::vector<size_t> source(size_t(w) * h, SIZE_MAX), queue;
+  for (size_t i = 0; i < source.size(); ++i) {
+    if (pack.field.state.data[i] != TexelState::kOutside &&
+        pack.maps.status.data[i] != TexelFitStatus::kTooFewSamples) {
+      source[i] = i;
+      queue.push_back(i);
+    }
+  }
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const size_t i = queue[head];
+    const int x = int(i % w), y = int(i / w);
+    for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+      if (x + dx < 0 || x + dx >= w || y + dy < 0 || y + dy >= h) continue;
+      const size_t j = size_t(y + dy) * w + (x + dx);
+      if (source[j] != SIZE_MAX) continue;
+      source[j] = source[i];
+      queue.push_back(j);
+    }
+  }
+  return source;
+}
+
 Result<GLuint> Compile(GLenum type, const std::string& source, const char* what) {
   const GLuint s = glCreateShader(type);
   const char* src = source.c_str();
@@ -394,20 +423,22 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
   p.box_top = std::move(setup->box_tops);
   const size_t n = size_t(w) * h;
   std::vector<float> surface(4 * n), rho_d(4 * n), rho_s(4 * n), lobe(4 * n);
+  const std::vector<size_t> source = ShadingSource(pack);
   for (size_t i = 0; i < n; ++i) {
     const float hh = pack.field.height_mm.data[i];
     const Vec3f& nn = pack.normals.data[i];
-    const bool inside = pack.field.state.data[i] != TexelState::kOutside;
-    const Vec3f& d = pack.maps.rho_d.data[i];
-    const Vec3f& s = pack.maps.rho_s.data[i];
-    const auto& c = pack.maps.lobe.data[i];
+    const bool shaded = source[i] != SIZE_MAX;
+    const size_t from = shaded ? source[i] : i;
+    const Vec3f& d = pack.maps.rho_d.data[from];
+    const Vec3f& s = pack.maps.rho_s.data[from];
+    const auto& c = pack.maps.lobe.data[from];
     for (int k = 0; k < 3; ++k) {
       surface[4 * i + k] = nn[k];
       rho_d[4 * i + k] = d[k];
       rho_s[4 * i + k] = s[k];
     }
     surface[4 * i + 3] = hh;
-    rho_d[4 * i + 3] = inside ? 1.0f : 0.0f;
+    rho_d[4 * i + 3] = shaded ? 1.0f : 0.0f;
     for (int k = 0; k < 4; ++k) lobe[4 * i + k] = c[k];
   }
   p.textures[0] = MakeTexture(w, h, surface, true);

@@ -22,7 +22,8 @@ namespace digitize::synth {
 struct RegionReflectanceError {
   int material = 0;             // index into SyntheticPhotoSet::materials
   std::string name;
-  bool is_measured = false;     // errors below are NaN: no one-lobe truth
+  bool is_measured = false;     // no one-lobe truth: the errors below are 0, only the texel count
+  bool has_lobe = false;        // the truth has a lobe (rho_s > 0); else the two lobe errors are 0
   size_t texels = 0;            // compared
   double rho_d_rel_median = 0;  // median over texels of |rho_d - true| / max(|true|, 0.01 1/sr)
                                 // (RGB norms; the floor keeps black paint meaningful)
@@ -37,7 +38,8 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
     const RigidTransform& fitted_canvas_from_scan, const SyntheticPhotoSet& truth,
     const Painting& painting);
 
-// One line per region: "gloss        4321 texels  rho_d 1.2 %  A 0.003  |log k| 0.05  |c| 0.02"
+// One line per region: "gloss        4321 texels  rho_d 1.2 %  A 0.003  |log k| 0.05  |c| 0.02";
+// "|log10 k| n/a (no lobe)" for matte paint.
 std::string FormatReflectanceAccuracy(const std::vector<RegionReflectanceError>& regions);
 
 }  // namespace digitize::synth

@@ -83,6 +83,11 @@ struct ImageHeader {
   int width = 0, height = 0, channels = 0;
   bool integer_samples = false;  // 8/16-bit integers (not float or half)
   std::string format;            // "openexr", "png", ...
+  // Physical pixel size from the resolution tags (XResolution + ResolutionUnit: TIFF, EXIF,
+  // JFIF, PNG pHYs), e.g. 300 per inch -> 25.4 / 300 mm. 0 when there is none, or no unit
+  // (an aspect ratio only); resolution_tag says what was read ("300 per inch").
+  double mm_per_pixel = 0;
+  std::string resolution_tag;
 };
 Result<ImageHeader> ReadImageHeader(const std::filesystem::path& path);
 

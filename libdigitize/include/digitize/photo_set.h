@@ -196,6 +196,11 @@ struct PhotoSet {
   // the scan frame (canvas_from_scan = identity), with this pitch. 0 / false otherwise.
   bool is_rti = false;
   double rti_pitch_mm = 0;
+  // Where rti_pitch_mm came from, in words for the user and the provenance: given, read from
+  // the first image's resolution tag, or assumed (rti_pitch_assumed: the physical size is then
+  // made up, and the tools say so).
+  std::string rti_pitch_source;
+  bool rti_pitch_assumed = false;
 
   PhotoLoadSummary summary;  // filled when the pixels are loaded
 };
@@ -214,7 +219,9 @@ struct PhotoSetOptions {
   double max_non_finite_fraction = 0.5;        // refuse a photo with more NaN/Inf pixels than this
   size_t max_pixels_per_image = size_t{1} << 28;  // refuse larger images (a corrupt header)
   // RTI only (ReadRtiCapture).
-  double rti_pixel_pitch_mm = 1.0;  // canvas mm per image pixel (RTI has no scale; 1 = pixels)
+  // Canvas mm per image pixel. 0: from the first image's resolution tag (ImageHeader::
+  // mm_per_pixel), else kRtiAssumedPitchMm, said in PhotoSet::rti_pitch_source.
+  double rti_pixel_pitch_mm = 0;
   double rti_camera_distance_mm = 1000.0;  // nominal height of the orthographic camera
   // Image paths of a calibration or .lp file must stay inside that file's folder, after resolving
   // "..", absolute paths and symbolic links: a shared capture must not make the reader open (and a
@@ -255,8 +262,11 @@ Result<PhotoSet> ReadCalibration(const std::filesystem::path& json_path,
 //
 // The photo set: directional lights with unit irradiance (RGB 1, 1, 1); one orthographic camera
 // looking straight down (-z) from rti_camera_distance_mm above the canvas centre, pitch
-// rti_pixel_pitch_mm, so that image pixel (x, y) sees texel (x, y) of the flat canvas
-// (HeightField::TexelCentreMm). is_rti = true, rti_pitch_mm = rti_pixel_pitch_mm.
+// rti_pitch_mm, so that image pixel (x, y) sees texel (x, y) of the flat canvas
+// (HeightField::TexelCentreMm). is_rti = true; rti_pitch_mm = rti_pixel_pitch_mm when given (> 0),
+// else the first image's resolution tag (300 dpi -> 25.4 / 300 mm), else kRtiAssumedPitchMm with
+// rti_pitch_assumed set; rti_pitch_source says which.
+inline constexpr double kRtiAssumedPitchMm = 1.0;  // RTI has no scale: 1 mm per pixel
 Result<PhotoSet> ReadRtiCapture(const std::filesystem::path& lp_path,
                                 const PhotoSetOptions& options = {},
                                 const ProgressCallback& progress = nullptr);

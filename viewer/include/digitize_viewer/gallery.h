@@ -63,14 +63,20 @@ struct GalleryShotOptions {
   GalleryShotOptions() { render.ambient = 0.05; }
 };
 
+// The file image `index` of `count` is written to: out_png itself for a single image, else
+// out_png with _NNN before the extension (walk/shot.png -> walk/shot_000.png, ...).
+std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_t index,
+                                     size_t count);
+
 // Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
-// camera of `path` when given, written as out_png with _NNN before the extension) and writes
+// camera of `path` when given, written to ScreenshotPath(out_png, i, path.size())) and writes
 // 8-bit sRGB images in the format the extension names (.png, .jpg, .tif; .exr holds their linear
-// values). Errors, before anything is rendered: an unknown extension, an output onto, into or
-// above an input or the current directory (CheckOutputPath), an image size this GL cannot render
-// (Renderer::CheckImageSize), no GL context. A pack the viewer refuses (PreparePainting,
-// AddPainting) is appended to `*failed` (naming it) and the others are hung and rendered; with
-// failed = nullptr it is the error. A failed write leaves the previous file in place.
+// values), creating out_png's folder when missing. Errors, before anything is rendered: an
+// unknown extension, an output onto, into or above an input or the current directory
+// (CheckOutputPath), an image size this GL cannot render (Renderer::CheckImageSize), no GL
+// context. A pack the viewer refuses (PreparePainting, AddPainting) is appended to `*failed`
+// (naming it) and the others are hung and rendered; with failed = nullptr it is the error. A
+// failed write leaves the previous file in place.
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path = {},

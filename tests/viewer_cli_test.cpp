@@ -1,0 +1,120 @@
+// `digitize-viewer` as a user runs it (headless screenshots): what it says it wrote is what it
+// wrote, a missing screenshot folder is made, and nothing to show is an error that writes nothing.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Output {
+  int exit_code = -1;
+  std::string text;  // stdout + stderr
+};
+
+class ViewerCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+#ifndef DIGITIZE_VIEWER
+    GTEST_SKIP() << "digitize-viewer is not built here (GLFW, imgui or stb missing)";
+#endif
+    dir_ = fs::temp_directory_path() /
+           ("digitize_viewer_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!dir_.empty()) fs::remove_all(dir_);
+  }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  // Runs the viewer in the test's folder, without a display (headless whatever the machine).
+  Output RunViewer(const std::string& args) const {
+#ifdef DIGITIZE_VIEWER
+    const std::string log = Path("viewer.log");
+    const std::string command = "cd " + dir_.string() + " && env -u DISPLAY -u WAYLAND_DISPLAY " +
+                                DIGITIZE_VIEWER + " " + args + " > " + log + " 2>&1";
+    const int status = std::system(command.c_str());
+    Output out;
+    out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    std::ifstream in(log);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    out.text = ss.str();
+    fs::remove(log);
+    return out;
+#else
+    (void)args;
+    return {};
+#endif
+  }
+  // Everything in the folder but the log: what the viewer wrote.
+  size_t Entries() const {
+    size_t n = 0;
+    for (const auto& e : fs::recursive_directory_iterator(dir_)) n += e.path().filename() != "viewer.log";
+    return n;
+  }
+  fs::path dir_;
+};
+
+TEST_F(ViewerCliTest, NoPackAndNoSyntheticIsAnErrorWithUsage) {
+  const Output out = RunViewer("--screenshot shot.png");
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("no pack given"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("--synthetic"), std::string::npos) << out.text;
+  EXPECT_EQ(Entries(), 0u);
+  // Without --screenshot (and no display) it would have written gallery.png here.
+  EXPECT_EQ(RunViewer("").exit_code, 1);
+  EXPECT_EQ(Entries(), 0u);
+}
+
+TEST_F(ViewerCliTest, EveryPackFailingWritesNothing) {
+  std::ofstream(Path("a.pack.exr")) << "not a pack";
+  std::ofstream(Path("b.pack.exr")) << "not one either";
+  std::ofstream(Path("shot.png")) << "an older screenshot";
+  const Output out = RunViewer("a.pack.exr b.pack.exr missing.pack.exr --screenshot shot.png");
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  for (const char* name : {"a.pack.exr", "b.pack.exr", "missing.pack.exr"})
+    EXPECT_NE(out.text.find(name), std::string::npos) << name << "\n" << out.text;
+  EXPECT_NE(out.text.find("none of the 3 pack(s) could be loaded"), std::string::npos) << out.text;
+  EXPECT_EQ(out.text.find("wrote"), std::string::npos) << out.text;
+  std::ifstream in(Path("shot.png"));
+  std::string content;
+  std::getline(in, content);
+  EXPECT_EQ(content, "an older screenshot");
+}
+
+// A camera path of 3 frames into a folder that does not exist yet: the folder is made, and the
+// message names the 3 files written (not the --screenshot name, which is not written).
+TEST_F(ViewerCliTest, CameraPathNamesTheFilesItWritesIntoANewFolder) {
+  std::ofstream(Path("walk.json")) << R"({"format": "digitize.camera_path", "version": 1,
+    "width": 64, "height": 48, "frames": [
+      {"eye": [3000, 1500, 1600], "target": [3000, 6000, 1500]},
+      {"eye": [3100, 1600, 1600], "target": [3000, 6000, 1500]},
+      {"eye": [3200, 1700, 1600], "target": [3000, 6000, 1500]}]})";
+  const Output out =
+      RunViewer("--synthetic --camera-path walk.json --screenshot walk/day1/shot.png");
+  ASSERT_EQ(out.exit_code, 0) << out.text;
+  for (const char* f : {"shot_000.png", "shot_001.png", "shot_002.png"})
+    EXPECT_TRUE(fs::exists(dir_ / "walk" / "day1" / f)) << f;
+  EXPECT_FALSE(fs::exists(dir_ / "walk" / "day1" / "shot.png"));
+  EXPECT_NE(out.text.find("walk/day1/shot_000.png"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("walk/day1/shot_002.png"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("3 images"), std::string::npos) << out.text;
+  EXPECT_EQ(out.text.find("shot.png "), std::string::npos) << out.text;
+  // One image: the name given, its folder made too.
+  const Output one = RunViewer("--synthetic --size 64x48 --screenshot new/one.png");
+  ASSERT_EQ(one.exit_code, 0) << one.text;
+  EXPECT_TRUE(fs::exists(dir_ / "new" / "one.png"));
+  EXPECT_NE(one.text.find("wrote new/one.png"), std::string::npos) << one.text;
+}
+
+}  // namespace
