@@ -88,9 +88,10 @@ int RunFit(FitArgs args) {
 
   std::vector<std::string> inputs = {args.photos};
   if (!args.canvas.empty()) inputs.insert(inputs.begin(), args.canvas);
-  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
-    return WriteReflectanceOutputs(dir, *result, args.options, inputs);
-  });
+  Status written =
+      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        return WriteReflectanceOutputs(dir, *result, args.options, inputs);
+      });
   if (!written.ok()) return Fail(cmd, written.message());
   std::printf("photos: %s\n", set->summary.Brief().c_str());
   std::printf("samples: %s\n", result->report.samples.Brief().c_str());
@@ -116,7 +117,9 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
       ->check(CLI::ExistingDirectory);
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier fit output (replaced only on success)")->required();
+  c->add_option("-o,--out", args->out,
+                "Output folder: new, empty, or an earlier fit output (replaced only on success)")
+      ->required();
   c->add_option("--held-out", args->held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
       ->check(CLI::ExistingFile);
