@@ -1,10 +1,9 @@
 // The `digitize` command line as a user meets it: help, exit codes, error messages that name the
 // file, outputs complete or absent, never partial.
-#include <gtest/gtest.h>
-
 #include <OpenImageIO/imageio.h>
-
-#include <nlohmann/json.hpp>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,12 +12,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace {
 
@@ -319,9 +316,9 @@ TEST_F(CliTest, PackRunInspectVerify) {
   // mounted): exit 1, the file and the cause named, the previous file intact, no temporary left.
   {
     std::ofstream(Path("limited.pack.exr")) << "the previous pack";
-    const std::string cmd = "trap '' XFSZ; ulimit -f 40; " + std::string(DIGITIZE_CLI) + " pack --canvas " +
-                            Path("c") + " --fit " + Path("f") + " --out " + Path("limited.pack.exr") +
-                            " > " + Path("limited.log") + " 2>&1";
+    const std::string cmd = "trap '' XFSZ; ulimit -f 40; " + std::string(DIGITIZE_CLI) +
+                            " pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                            Path("limited.pack.exr") + " > " + Path("limited.log") + " 2>&1";
     const int status = std::system(cmd.c_str());
     EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 1);
     const std::string log = Bytes(Path("limited.log"));
@@ -332,11 +329,14 @@ TEST_F(CliTest, PackRunInspectVerify) {
 
     fs::create_directories(Path("full"));
     if (::geteuid() == 0 &&
-        std::system(("mount -t tmpfs -o size=64k tmpfs " + Path("full") + " 2>/dev/null").c_str()) == 0) {
+        std::system(
+            ("mount -t tmpfs -o size=64k tmpfs " + Path("full") + " 2>/dev/null").c_str()) == 0) {
       std::ofstream(Path("full/p.pack.exr")) << "the previous pack";
-      Output full = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("full/p.pack.exr"));
+      Output full = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                           Path("full/p.pack.exr"));
       const std::string kept = Bytes(Path("full/p.pack.exr"));
-      const auto left = std::distance(fs::directory_iterator(Path("full")), fs::directory_iterator());
+      const auto left =
+          std::distance(fs::directory_iterator(Path("full")), fs::directory_iterator());
       (void)std::system(("umount " + Path("full")).c_str());
       EXPECT_EQ(full.exit_code, 1);
       EXPECT_NE(full.text.find("p.pack.exr: write failed"), std::string::npos) << full.text;
@@ -597,8 +597,11 @@ TEST_F(CliTest, CanvasFolderIsOneDefinitionAndCalibrationsAreChecked) {
 // Issue 10, section 1: a folder given as --out is replaced only when it is new, empty or an
 // earlier output of the same kind; a folder of the user's files survives every command.
 TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
-  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
-                   "--lights 8 --seed 2").exit_code, 0);
+  ASSERT_EQ(RunCli("synth --out " + Path("s") +
+                   " --resolution 96 --scan-size 96 96 --photos "
+                   "--lights 8 --seed 2")
+                .exit_code,
+            0);
   ASSERT_EQ(RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c")).exit_code, 0);
   fs::create_directories(Path("docs/notes"));
   std::ofstream(Path("docs/notes/condition_report.txt")) << "irreplaceable";
@@ -629,7 +632,9 @@ TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
 
   // An output of another kind is not replaced either: a canvas over a fit folder.
   ASSERT_EQ(RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
-                   " --out " + Path("f")).exit_code, 0);
+                   " --out " + Path("f"))
+                .exit_code,
+            0);
   Output kind = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("f"));
   EXPECT_EQ(kind.exit_code, 1);
   EXPECT_NE(kind.text.find("fit output of `digitize fit`"), std::string::npos) << kind.text;
@@ -640,7 +645,9 @@ TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
 // file added to an output makes it the user's.
 TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
   ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96").exit_code, 0);
-  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --seed 4").exit_code, 0);
+  ASSERT_EQ(
+      RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --seed 4").exit_code,
+      0);
   fs::create_directories(Path("empty"));
   Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty"));
   ASSERT_EQ(pre.exit_code, 0) << pre.text;
@@ -650,7 +657,8 @@ TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
   EXPECT_EQ(marker.value("format", ""), "digitize.output");
   EXPECT_EQ(marker.value("command", ""), "preprocess");
   EXPECT_EQ(marker.value("content", ""), "canvas");
-  Output again = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty") + " --cell-px 8");
+  Output again =
+      RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty") + " --cell-px 8");
   ASSERT_EQ(again.exit_code, 0) << again.text;
   std::ofstream(Path("empty/my_notes.txt")) << "mine";
   Output mine = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty"));
@@ -661,8 +669,11 @@ TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
 
 // No output onto, into or above an input, the current directory or its parents.
 TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
-  ASSERT_EQ(RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
-                   "--lights 8 --seed 2").exit_code, 0);
+  ASSERT_EQ(RunCli("synth --out " + Path("s") +
+                   " --resolution 96 --scan-size 96 96 --photos "
+                   "--lights 8 --seed 2")
+                .exit_code,
+            0);
   fs::create_directories(Path("museum/scans"));
   fs::copy_file(Path("s/scan.exr"), Path("museum/scans/scan.exr"));
   std::ofstream(Path("museum/notes.txt")) << "irreplaceable";
@@ -691,9 +702,12 @@ TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
   // pack onto a file of its canvas folder; fit into its canvas; run onto one of its photos.
   ASSERT_EQ(RunCli("preprocess " + scan + " --out " + Path("c")).exit_code, 0);
   ASSERT_EQ(RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
-                   " --out " + Path("f")).exit_code, 0);
+                   " --out " + Path("f"))
+                .exit_code,
+            0);
   const std::string height = Bytes(Path("c/height.exr"));
-  Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("c/height.exr"));
+  Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                       Path("c/height.exr"));
   EXPECT_EQ(pack.exit_code, 1) << pack.text;
   EXPECT_NE(pack.text.find("c/height.exr: lies inside the input"), std::string::npos) << pack.text;
   EXPECT_EQ(Bytes(Path("c/height.exr")), height);
@@ -704,7 +718,8 @@ TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
   fs::path photo;
   for (const auto& e : fs::directory_iterator(Path("s/photos/images"))) photo = e.path();
   const std::string photo_bytes = Bytes(photo);
-  Output run = RunCli("run --photos " + Path("s/photos/calib.json") + " " + scan + " --out " + photo.string());
+  Output run = RunCli("run --photos " + Path("s/photos/calib.json") + " " + scan + " --out " +
+                      photo.string());
   EXPECT_EQ(run.exit_code, 1) << run.text;
   EXPECT_NE(run.text.find("is the input"), std::string::npos) << run.text;
   EXPECT_EQ(Bytes(photo), photo_bytes);
@@ -721,7 +736,8 @@ TEST_F(CliTest, StaleTemporaryFoldersAreRemoved) {
   ::waitpid(child, nullptr, 0);
   const std::string pid = std::to_string(child);
   const std::string live = std::to_string(::getpid());
-  for (const std::string& name : {".c.partial-" + pid + "-0", ".c.old-" + pid + "-1", ".c.partial-" + live + "-7"}) {
+  for (const std::string& name :
+       {".c.partial-" + pid + "-0", ".c.old-" + pid + "-1", ".c.partial-" + live + "-7"}) {
     fs::create_directories(dir_ / name / "deep");
     std::ofstream(dir_ / name / "deep" / "height.exr") << "hundreds of MB";
   }

@@ -106,7 +106,8 @@ TEST_F(OutputDirTest, SuccessReplacesAFailureKeepsTheOldSet) {
 TEST_F(OutputDirTest, AFileInTheWayIsNotReplaced) {
   const fs::path out = root_ / "taken";
   std::ofstream(out) << "keep";
-  const Status s = WriteDirectoryAtomically(out, kOutput, [](const fs::path&) { return Status::Ok(); });
+  const Status s =
+      WriteDirectoryAtomically(out, kOutput, [](const fs::path&) { return Status::Ok(); });
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("taken"), std::string::npos) << s.message();
   EXPECT_TRUE(fs::is_regular_file(out));

@@ -213,7 +213,8 @@ TEST_F(OutputSafetyTest, AFailedMoveAsideSaysWhy) {
   // The aside name (".canvas.old-<pid>-<n>") taken by non-empty folders of this live process:
   // the rename fails ("Directory not empty"), and that cause must reach the message.
   for (int n = 0; n < 64; ++n) {
-    const fs::path taken = root_ / (".canvas.old-" + std::to_string(::getpid()) + "-" + std::to_string(n));
+    const fs::path taken =
+        root_ / (".canvas.old-" + std::to_string(::getpid()) + "-" + std::to_string(n));
     fs::create_directories(taken);
     std::ofstream(taken / "x") << "x";
   }
@@ -239,9 +240,12 @@ Grid<std::array<uint8_t, 3>> Noise(int size = 384) {
 
 TEST_F(OutputSafetyTest, ImagesAreWrittenInTheFormatTheirExtensionNames) {
   const auto img = Noise(32);
-  for (const auto& [name, format] : std::vector<std::pair<std::string, std::string>>{
-           {"shot.png", "png"}, {"shot.jpg", "jpeg"}, {"shot.JPEG", "jpeg"},
-           {"shot.tif", "tiff"}, {"shot.exr", "openexr"}}) {
+  for (const auto& [name, format] :
+       std::vector<std::pair<std::string, std::string>>{{"shot.png", "png"},
+                                                        {"shot.jpg", "jpeg"},
+                                                        {"shot.JPEG", "jpeg"},
+                                                        {"shot.tif", "tiff"},
+                                                        {"shot.exr", "openexr"}}) {
     const Status s = WriteRgb8(root_ / name, img);
     ASSERT_TRUE(s.ok()) << s.message();
     auto header = ReadImageHeader(root_ / name);

@@ -666,8 +666,11 @@ TEST(ViewerTest, ScreenshotFormatFollowsTheExtension) {
   GalleryShotOptions shot;
   shot.width = 64;
   shot.height = 36;
-  for (const auto& [name, format] : std::vector<std::pair<std::string, std::string>>{
-           {"shot.jpg", "jpeg"}, {"shot.png", "png"}, {"shot.tif", "tiff"}, {"shot.exr", "openexr"}}) {
+  for (const auto& [name, format] :
+       std::vector<std::pair<std::string, std::string>>{{"shot.jpg", "jpeg"},
+                                                        {"shot.png", "png"},
+                                                        {"shot.tif", "tiff"},
+                                                        {"shot.exr", "openexr"}}) {
     const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / name, {}, shot);
     ASSERT_TRUE(s.ok()) << s.message();
     auto header = ReadImageHeader(dir / name);
@@ -675,9 +678,11 @@ TEST(ViewerTest, ScreenshotFormatFollowsTheExtension) {
     EXPECT_EQ(header->format, format) << name;
     EXPECT_EQ(header->width, 64);
   }
-  const Status bmp = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "shot.bmp", {}, shot);
+  const Status bmp =
+      RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "shot.bmp", {}, shot);
   EXPECT_FALSE(bmp.ok());
-  EXPECT_NE(bmp.message().find("shot.bmp: unknown image extension"), std::string::npos) << bmp.message();
+  EXPECT_NE(bmp.message().find("shot.bmp: unknown image extension"), std::string::npos)
+      << bmp.message();
   EXPECT_FALSE(std::filesystem::exists(dir / "shot.bmp"));
 
   // The screenshot aimed at an input (here the "pack" file) is refused; the input is intact.

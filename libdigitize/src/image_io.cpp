@@ -152,7 +152,8 @@ std::string JoinNames(const std::vector<std::string>& names) {
 void RemoveStaleTemporaries(const fs::path& dir, const std::string& prefix) {
   const fs::path where = dir.empty() ? fs::path(".") : dir;
   std::error_code ec;
-  std::vector<fs::path> stale;  // removed after the listing: removing while iterating is unspecified
+  // Removed after the listing: removing entries while iterating is unspecified.
+  std::vector<fs::path> stale;
   for (fs::directory_iterator it(where, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (name.rfind(prefix, 0) != 0) continue;
@@ -204,9 +205,11 @@ Status WriteImageAtomically(
     const std::function<Status(OIIO::ImageOutput& out, const std::string& temp)>& write) {
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {
     auto out = OIIO::ImageOutput::create(format);
-    if (!out) return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
+    if (!out)
+      return Error{path.string() + ": no " + format + " writer: " + OneLine(OIIO::geterror())};
     if (!out->supports("ioproxy"))
-      return Error{path.string() + ": the " + format + " writer cannot write through a checked file"};
+      return Error{path.string() + ": the " + format +
+                   " writer cannot write through a checked file"};
     FILE* file = std::fopen(temp.c_str(), "wb");
     if (file == nullptr) return Error{path.string() + ": cannot open for writing: " + Cause(errno)};
     CheckedFile proxy(file);
@@ -347,7 +350,8 @@ Status WriteSrgbPng(const fs::path& path, int width, int height, int bits, const
                     int zlib_level) {
   if (bits != 8 && bits != 16)
     return Error{path.string() + ": PNG codes are 8 or 16 bits, got " + std::to_string(bits)};
-  OIIO::ImageSpec spec(width, height, 3, bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+  OIIO::ImageSpec spec(width, height, 3,
+                       bits == 8 ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
   spec.attribute("oiio:ColorSpace", "sRGB");
   spec.attribute("png:compressionLevel", zlib_level);
   return WritePixels(path, "png", spec, codes);

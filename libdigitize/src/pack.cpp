@@ -16,8 +16,8 @@
 #include <nlohmann/json.hpp>
 #include <system_error>
 
-#include "digitize/image_io.h"
 #include "checked_output.h"
+#include "digitize/image_io.h"
 
 namespace digitize {
 namespace {
@@ -744,15 +744,18 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
     if (!out->supports("multiimage"))
       return Error{file + ": this OpenImageIO cannot write multi-part OpenEXR"};
     if (!out->open(temp.string(), kParts, specs))
-      return WithDiskFull(Error{file + ": cannot open for writing: " + OneLine(out->geterror())}, path);
+      return WithDiskFull(Error{file + ": cannot open for writing: " + OneLine(out->geterror())},
+                          path);
     for (int p = 0; p < kParts; ++p) {
       if (p > 0 && !out->open(temp.string(), specs[p], OIIO::ImageOutput::AppendSubimage))
         return WithDiskFull(
-            Error{file + ": cannot start part " + kPartNames[p] + ": " + OneLine(out->geterror())}, path);
+            Error{file + ": cannot start part " + kPartNames[p] + ": " + OneLine(out->geterror())},
+            path);
       if (!out->write_image(specs[p].format, data[p]))
         return WithDiskFull(Error{file + ": write failed: " + OneLine(out->geterror())}, path);
     }
-    if (!out->close()) return WithDiskFull(Error{file + ": write failed: " + OneLine(out->geterror())}, path);
+    if (!out->close())
+      return WithDiskFull(Error{file + ": write failed: " + OneLine(out->geterror())}, path);
     return Status::Ok();
   });
 }

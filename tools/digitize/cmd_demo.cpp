@@ -195,9 +195,9 @@ int RunDemo(const DemoArgs& args) {
     // a warning, not a failure: the digitization itself is done.
     const std::filesystem::path pack_path = dir / "painting.pack.exr";
     auto pack = viewer::LoadPackForViewer(pack_path);
-    gallery = pack.ok() ? viewer::RenderGalleryScreenshots({{(out / "painting.pack.exr").string(),
-                                                             std::move(*pack)}},
-                                                           dir / "gallery.png")
+    gallery = pack.ok() ? viewer::RenderGalleryScreenshots(
+                              {{(out / "painting.pack.exr").string(), std::move(*pack)}},
+                              dir / "gallery.png")
                         : Status(pack.error());
     return Status::Ok();
   });
@@ -221,9 +221,10 @@ int RunDemo(const DemoArgs& args) {
   if (fit) {
     const std::filesystem::path pack_path = out / "painting.pack.exr";
     if (gallery.ok())
-      std::printf("gallery:  %s (%s in the virtual gallery, hybrid + adaptive; walk in it with "
-                  "digitize-viewer %s)\n",
-                  (out / "gallery.png").c_str(), pack_path.c_str(), pack_path.c_str());
+      std::printf(
+          "gallery:  %s (%s in the virtual gallery, hybrid + adaptive; walk in it with "
+          "digitize-viewer %s)\n",
+          (out / "gallery.png").c_str(), pack_path.c_str(), pack_path.c_str());
     else
       std::printf("gallery screenshot skipped: %s\n", gallery.message().c_str());
   }

@@ -100,9 +100,10 @@ int RunFit(FitArgs args) {
 
   std::vector<std::string> inputs = {args.photos};
   if (!args.canvas.empty()) inputs.insert(inputs.begin(), args.canvas);
-  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
-    return WriteReflectanceOutputs(dir, *result, args.options, inputs);
-  });
+  Status written =
+      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        return WriteReflectanceOutputs(dir, *result, args.options, inputs);
+      });
   if (!written.ok()) return Fail(cmd, written.message());
   for (const std::string& w : result->report.Warnings()) Warn(cmd, w);
   std::printf("photos: %s\n", set->summary.Brief().c_str());
@@ -130,7 +131,10 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
       ->check(CLI::ExistingDirectory);
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier fit output (replaced only on success)")->required()->transform(FolderPath());
+  c->add_option("-o,--out", args->out,
+                "Output folder: new, empty, or an earlier fit output (replaced only on success)")
+      ->required()
+      ->transform(FolderPath());
   c->add_option("--held-out", args->held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
       ->check(CLI::ExistingFile);

@@ -46,7 +46,8 @@ void AddPackWriteFlags(CLI::App* c, PackWriteOptions& o, bool& quantised) {
 int PackFromFolders(const std::string& cmd, const std::string& canvas_dir, const std::string& fit_dir,
                     const std::string& out, PackWriteOptions options) {
   if (Status s = options.Validate(); !s.ok()) return Fail(cmd, s.message());
-  if (Status s = CheckOutputPath(out, {canvas_dir, fit_dir}); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = CheckOutputPath(out, {canvas_dir, fit_dir}); !s.ok())
+    return Fail(cmd, s.message());
   auto maps = ReadReflectanceMaps(fit_dir);
   if (!maps.ok()) return Fail(cmd, maps.error().message);
   PreprocessedCanvas canvas;

@@ -39,9 +39,10 @@ int RunPreprocess(const PreprocessArgs& args) {
   bar.Finish();
   if (!result.ok()) return Fail(cmd, result.error().message);
 
-  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
-    return WritePreprocessOutputs(dir, *result, args.options, args.scans);
-  });
+  Status written =
+      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        return WritePreprocessOutputs(dir, *result, args.options, args.scans);
+      });
   if (!written.ok()) return Fail(cmd, written.message());
   for (const StepReport& step : result->steps) std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf("total %.3f s; outputs in %s/ (height.exr, normals.exr, mask.png, boxes.json, "
@@ -119,7 +120,10 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
                 "Scan file(s): float EXR/TIFF (XYZ mm, or depth with --pixel-pitch-mm), 16-bit "
                 "PNG/TIFF (with --height-scale-mm), PLY point grid")
       ->required()->check(CLI::ExistingFile);
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier canvas output (replaced only on success)")->required()->transform(FolderPath());
+  c->add_option("-o,--out", args->out,
+                "Output folder: new, empty, or an earlier canvas output (replaced only on success)")
+      ->required()
+      ->transform(FolderPath());
   c->add_option("--mask", args->mask, "Mask image, same size as the scan; 0 = missing sample")
       ->check(CLI::ExistingFile)->group("Input");
   c->add_option("--pixel-pitch-mm", args->read.pixel_pitch_mm,

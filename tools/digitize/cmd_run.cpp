@@ -53,7 +53,8 @@ int Run(RunArgs args) {
   }
 
   // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
-  std::vector<std::filesystem::path> inputs(args.preprocess.scans.begin(), args.preprocess.scans.end());
+  std::vector<std::filesystem::path> inputs(args.preprocess.scans.begin(),
+                                            args.preprocess.scans.end());
   if (!args.preprocess.mask.empty()) inputs.emplace_back(args.preprocess.mask);
   inputs.emplace_back(fa.photos);
   for (const Photo& p : set->photos) inputs.push_back(p.path);
@@ -65,8 +66,10 @@ int Run(RunArgs args) {
   const FolderOutput work_canvas{cmd, "canvas", inputs}, work_fit{cmd, "fit", inputs};
   std::vector<std::filesystem::path> pack_keeps_off = inputs;
   if (!args.work.empty()) {
-    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok()) return Fail(cmd, s.message());
-    if (Status s = CheckFolderOutput(work / "fit", work_fit); !s.ok()) return Fail(cmd, s.message());
+    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok())
+      return Fail(cmd, s.message());
+    if (Status s = CheckFolderOutput(work / "fit", work_fit); !s.ok())
+      return Fail(cmd, s.message());
     pack_keeps_off.push_back(work / "canvas");
     pack_keeps_off.push_back(work / "fit");
   }
@@ -136,14 +139,17 @@ int Run(RunArgs args) {
 
   if (!args.work.empty()) {
     if (preprocessed) {
-      Status written = WriteDirectoryAtomically(work / "canvas", work_canvas, [&](const std::filesystem::path& dir) {
-        return WritePreprocessOutputs(dir, *preprocessed, args.preprocess.options, args.preprocess.scans);
-      });
+      Status written = WriteDirectoryAtomically(
+          work / "canvas", work_canvas, [&](const std::filesystem::path& dir) {
+            return WritePreprocessOutputs(dir, *preprocessed, args.preprocess.options,
+                                          args.preprocess.scans);
+          });
       if (!written.ok()) return Fail(cmd, written.message());
     }
-    Status written = WriteDirectoryAtomically(work / "fit", work_fit, [&](const std::filesystem::path& dir) {
-      return WriteReflectanceOutputs(dir, *fit, fa.options, photo_inputs);
-    });
+    Status written =
+        WriteDirectoryAtomically(work / "fit", work_fit, [&](const std::filesystem::path& dir) {
+          return WriteReflectanceOutputs(dir, *fit, fa.options, photo_inputs);
+        });
     if (!written.ok()) return Fail(cmd, written.message());
   }
   auto pack = AssemblePack(std::move(canvas), fit->maps, std::move(provenance));
@@ -189,9 +195,11 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
   c->add_option("--photos", args->fit.photos, "Calibration JSON or RTI .lp file")
       ->required()->check(CLI::ExistingFile);
   c->add_option("-o,--out", args->out, "Pack file to write (replaced only on success)")->required();
-  c->add_option("--work", args->work,
-                "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
-                "subfolders are replaced, each when new, empty or an earlier output of its kind)")->transform(FolderPath());
+  c->add_option(
+      "--work", args->work,
+      "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
+      "subfolders are replaced, each when new, empty or an earlier output of its kind)")
+      ->transform(FolderPath());
   c->add_option("--held-out", args->fit.held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
       ->check(CLI::ExistingFile);

@@ -76,11 +76,12 @@ int RunSynth(SynthArgs args) {
         [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); });
   }
   bar.Update("writing", 0.7 * k + render_share);
-  Status written = WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
-    if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
-    if (!args.photos) return Status::Ok();
-    return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
-  });
+  Status written =
+      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
+        if (!args.photos) return Status::Ok();
+        return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
+      });
   bar.Finish();
   if (!written.ok()) return Fail(cmd, written.message());
   std::printf("synthetic painting %.0f x %.0f mm, %dx%d texels; scan %dx%d (%zu exposure(s)) -> %s/\n",
@@ -98,7 +99,10 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<SynthArgs>();
   CLI::App* c = app.add_subcommand(
       "synth", "Generate a synthetic framed painting, its scan, and the ground truth beside it");
-  c->add_option("-o,--out", args->out, "Output folder: new, empty, or an earlier synth output (replaced only on success)")->required()->transform(FolderPath());
+  c->add_option("-o,--out", args->out,
+                "Output folder: new, empty, or an earlier synth output (replaced only on success)")
+      ->required()
+      ->transform(FolderPath());
   auto& p = args->painting;
   c->add_option("--seed", p.seed, "Random seed (same seed, same data)")->capture_default_str();
   c->add_option("--width-mm", p.width_mm, "Canvas width (mm)")->capture_default_str()->group("Painting");

@@ -253,7 +253,8 @@ int main(int argc, char** argv) {
   app.add_option("packs", paths, "texture packs (.pack.exr)");
   app.add_flag("--synthetic", synthetic, "also hang a synthetic painting (ground-truth pack)");
   app.add_option("--technique", technique, "mesh, relief, bump, hybrid, adaptive, screen-error");
-  app.add_option("--screenshot", screenshot, "render headless into this image (.png, .jpg, .tif, .exr) and exit");
+  app.add_option("--screenshot", screenshot,
+                 "render headless into this image (.png, .jpg, .tif, .exr) and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
   bool heatmap = false, show_boxes = false, shadows = false;

@@ -55,7 +55,8 @@ Status CheckFolderOutput(const std::filesystem::path& dir, const FolderOutput& o
 // folders of killed writers of the same target (".NAME.partial-PID-N", ".NAME.old-PID-N" whose
 // process is gone) are removed whenever `dir` holds a complete output: before the write when it
 // exists, and after a successful swap.
-Status WriteDirectoryAtomically(const std::filesystem::path& dir, const FolderOutput& output,
-                                const std::function<Status(const std::filesystem::path& temp_dir)>& write);
+Status WriteDirectoryAtomically(
+    const std::filesystem::path& dir, const FolderOutput& output,
+    const std::function<Status(const std::filesystem::path& temp_dir)>& write);
 
 }  // namespace digitize
