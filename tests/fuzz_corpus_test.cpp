@@ -321,10 +321,10 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   // the viewer cannot hang (under 2 x 2 texels).
   const fs::path viewer_dir = CorpusDir("fuzz_viewer_load");
   fs::create_directories(viewer_dir);
-  for (const char* name : {"valid_half_8x8_box.exr", "valid_quantised_9x5.exr",
-                           "valid_uncompressed_8x8_box.exr", "bad_forged_pitch_1e308.exr",
-                           "bad_forged_max_height.exr", "bad_forged_translation.exr",
-                           "bad_truncated.exr"})
+  for (const char* name :
+       {"valid_half_8x8_box.exr", "valid_quantised_9x5.exr", "valid_uncompressed_8x8_box.exr",
+        "bad_forged_pitch_1e308.exr", "bad_forged_max_height.exr", "bad_forged_translation.exr",
+        "bad_truncated.exr"})
     fs::copy_file(dir / name, viewer_dir / name, fs::copy_options::overwrite_existing);
   {
     Pack line = TinyPack(1, 6, false);
