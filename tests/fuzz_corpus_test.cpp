@@ -30,7 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path CorpusDir(const std::string& target) {
-  return fs::path(__FILE__).parent_path() / "fuzz" / "corpus" / target;
+  return fs::path(DIGITIZE_TESTS_DIR) / "fuzz" / "corpus" / target;
 }
 
 std::vector<fs::path> CorpusFiles(const std::string& target) {
@@ -191,7 +191,7 @@ TEST(FuzzCorpusTest, DeeplyNestedValueIsAnErrorNotAStackOverflow) {
 // ---------------------------------------------------------------------------------------------
 // The pack seeds. Not a test: run by hand when the pack format changes (the valid_ seeds then fail
 // PackSeedsKeepTheContract above), from the repository root:
-//   build-f/tests/fuzz_corpus_test --gtest_also_run_disabled_tests --gtest_filter='*WritePackSeeds'
+//   build/tests/fuzz_corpus_test --gtest_also_run_disabled_tests --gtest_filter='*WritePackSeeds'
 // Small on purpose (8x8 and 9x5 texels, 2-4 KB): libFuzzer mutates every byte of a seed.
 
 // An 8x8 (or any size) pack: a bump in the middle, an outside border, one relief box over the
