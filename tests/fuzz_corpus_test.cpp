@@ -130,6 +130,20 @@ TEST(FuzzCorpusTest, ViewerLoadSeedsKeepTheContract) {
   EXPECT_GE(tally.bad, kMinBadSeeds);
 }
 
+// Found by fuzz_viewer_load: an attribute name longer than OpenEXR reads (31 characters without
+// the long-names flag) put our header pre-scan and OpenEXR out of step, and OpenEXR then read
+// name bytes as a string's size and allocated 2 GB for a 3 KB file. Refused by the pre-scan now.
+TEST(FuzzCorpusTest, LongAttributeNameIsRefusedBeforeOpenExr) {
+  for (const char* target : {"fuzz_pack", "fuzz_viewer_load"}) {
+    const fs::path file = CorpusDir(target) / "bad_long_attribute_name_oom.exr";
+    const auto pack = ReadPack(file);
+    ASSERT_FALSE(pack.ok());
+    EXPECT_EQ(pack.error().message,
+              file.string() + ": part 0 has an attribute or type name longer than 31 characters, "
+                              "OpenEXR's limit without long names");
+  }
+}
+
 // Through the file readers (headers only): the corpus names images that do not exist, so a seed
 // that parses is refused for its first image; either way the error names the file read.
 TEST(FuzzCorpusTest, FileReadersNameTheFile) {

@@ -288,9 +288,14 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
       }
       std::string attr, type;
       int32_t size = 0;
-      if (!read_string(attr) || !read_string(type) || !read_i32(size) || size < 0 ||
-          !need(static_cast<size_t>(size)))
-        return Error{truncated};
+      for (std::string* s : {&attr, &type}) {
+        if (read_string(*s)) continue;
+        if (!need(max_name + 1)) return Error{truncated};
+        return Error{name + ": part " + std::to_string(parts.size()) +
+                     " has an attribute or type name longer than " + std::to_string(max_name) +
+                     " characters, OpenEXR's limit" + (max_name < 255 ? " without long names" : "")};
+      }
+      if (!read_i32(size) || size < 0 || !need(static_cast<size_t>(size))) return Error{truncated};
       if (attr == "dataWindow") {
         if (type != "box2i" || size != 16) return Error{name + ": malformed dataWindow attribute"};
         int32_t box[4] = {0, 0, 0, 0};
