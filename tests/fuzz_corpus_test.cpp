@@ -139,8 +139,9 @@ TEST(FuzzCorpusTest, LongAttributeNameIsRefusedBeforeOpenExr) {
     const auto pack = ReadPack(file);
     ASSERT_FALSE(pack.ok());
     EXPECT_EQ(pack.error().message,
-              file.string() + ": part 0 has an attribute or type name longer than 31 characters, "
-                              "OpenEXR's limit without long names");
+              file.string() +
+                  ": part 0 has an attribute or type name longer than 31 characters, "
+                  "OpenEXR's limit without long names");
   }
 }
 

@@ -293,7 +293,8 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
         if (!need(max_name + 1)) return Error{truncated};
         return Error{name + ": part " + std::to_string(parts.size()) +
                      " has an attribute or type name longer than " + std::to_string(max_name) +
-                     " characters, OpenEXR's limit" + (max_name < 255 ? " without long names" : "")};
+                     " characters, OpenEXR's limit" +
+                     (max_name < 255 ? " without long names" : "")};
       }
       if (!read_i32(size) || size < 0 || !need(static_cast<size_t>(size))) return Error{truncated};
       if (attr == "dataWindow") {
