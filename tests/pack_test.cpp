@@ -470,14 +470,21 @@ TEST(Pack, ForgedAbsurdMetadataIsRefused) {
   };
   const std::vector<Case> cases = {
       {"pitch_1e308", {{"digitize:pitch_mm", "1e308"}}, "digitize:pitch_mm 1e+308 x 64 texels"},
-      {"pitch_tiny", {{"digitize:pitch_mm", "1e-300"}}, "digitize:pitch_mm 1e-300 is not a texel pitch"},
+      {"pitch_tiny",
+       {{"digitize:pitch_mm", "1e-300"}},
+       "digitize:pitch_mm 1e-300 is not a texel pitch"},
       // 2 m texels: 128 m wide, with a size_mm that agrees, so the bound is what refuses it.
-      {"pitch_2000", {{"digitize:pitch_mm", "2000"}, {"digitize:size_mm", "128000 x 96000"}},
+      {"pitch_2000",
+       {{"digitize:pitch_mm", "2000"}, {"digitize:size_mm", "128000 x 96000"}},
        "digitize:pitch_mm 2000 x 64 texels = 128000 mm, beyond the 100 m"},
-      {"max_height", {{"digitize:max_height_mm", "1e30"}}, "digitize:max_height_mm 1e+30 is outside"},
+      {"max_height",
+       {{"digitize:max_height_mm", "1e30"}},
+       "digitize:max_height_mm 1e+30 is outside"},
       {"delta0", {{"digitize:delta0_mm", "-1"}}, "digitize:delta0_mm -1 is not in"},
       {"size_mm", {{"digitize:size_mm", "800 x 600"}}, "digitize:size_mm 800 x 600 mm disagrees"},
-      {"size_mm_text", {{"digitize:size_mm", "big"}}, "header attribute digitize:size_mm = \"big\" is not"},
+      {"size_mm_text",
+       {{"digitize:size_mm", "big"}},
+       "header attribute digitize:size_mm = \"big\" is not"},
       {"translation",
        {{"digitize:canvas_from_scan", "{" + rotation + R"(,"translation_mm":[0,0,1e12]})"}},
        "digitize:canvas_from_scan translation (0, 0, 1e+12) mm is farther than 100 m"},
@@ -515,13 +522,20 @@ TEST(Pack, ValidateAppliesThePhysicalBounds) {
     EXPECT_FALSE(s.ok()) << expect;
     EXPECT_NE(s.message().find(expect), std::string::npos) << s.message();
   };
-  refused(good, [](Pack& p) { p.field.pitch_mm = 1e308; }, "pitch_mm 1e+308 x 32 texels");
-  refused(good, [](Pack& p) { p.field.pitch_mm = 1e-9; }, "is not a texel pitch");
-  refused(good, [](Pack& p) { p.field.pitch_mm = kMaxPackExtentMm / 31; }, "beyond the 100 m");
-  refused(good, [](Pack& p) { p.field.height_mm(3, 4) = 2000.0f; }, "height at texel 3, 4 = 2000");
-  refused(good, [](Pack& p) { p.max_height_mm = 5000; }, "max_height_mm 5000 is outside");
-  refused(good, [](Pack& p) { p.canvas_from_scan.translation.x() = 2e5; }, "farther than 100 m");
-  refused(good, [](Pack& p) { p.canvas_from_scan.rotation *= 1.01; }, "is not a rotation");
+  refused(
+      good, [](Pack& p) { p.field.pitch_mm = 1e308; }, "pitch_mm 1e+308 x 32 texels");
+  refused(
+      good, [](Pack& p) { p.field.pitch_mm = 1e-9; }, "is not a texel pitch");
+  refused(
+      good, [](Pack& p) { p.field.pitch_mm = kMaxPackExtentMm / 31; }, "beyond the 100 m");
+  refused(
+      good, [](Pack& p) { p.field.height_mm(3, 4) = 2000.0f; }, "height at texel 3, 4 = 2000");
+  refused(
+      good, [](Pack& p) { p.max_height_mm = 5000; }, "max_height_mm 5000 is outside");
+  refused(
+      good, [](Pack& p) { p.canvas_from_scan.translation.x() = 2e5; }, "farther than 100 m");
+  refused(
+      good, [](Pack& p) { p.canvas_from_scan.rotation *= 1.01; }, "is not a rotation");
   // At the bounds themselves: accepted (100 m exactly, heights of 1 m).
   Pack edge = good;
   edge.field.pitch_mm = kMaxPackExtentMm / 32;
@@ -545,8 +559,9 @@ TEST(Pack, ProvenanceInputsAreRelative) {
                             dir / "scans" / "scan.exr"})
     WriteBytes(f, {'x'});
   PackProvenance p;
-  ASSERT_OK(AddProvenanceInputs(p, {dir / "scans" / "scan.exr", dir / "capture" / "calib.json",
-                                    dir / "capture" / "images" / "a.png"},
+  ASSERT_OK(AddProvenanceInputs(p,
+                                {dir / "scans" / "scan.exr", dir / "capture" / "calib.json",
+                                 dir / "capture" / "images" / "a.png"},
                                 dir / "capture"));
   ASSERT_EQ(p.inputs.size(), 3u);
   EXPECT_EQ(p.inputs[0].name, "../scans/scan.exr");

@@ -518,9 +518,8 @@ TEST_F(CalibrationTest, ImagePathsOutsideTheCaptureFolderAreRefused) {
   for (const std::string& outside : {std::string("../a.png"), Path("c.exr").string(),
                                      std::string("link.png"), std::string("/etc/passwd")}) {
     SCOPED_TRACE(outside);
-    ExpectError(read(outside),
-                {"capture/calib.json: images[0]", outside, "outside the capture folder",
-                 "--allow-outside-paths"});
+    ExpectError(read(outside), {"capture/calib.json: images[0]", outside,
+                                "outside the capture folder", "--allow-outside-paths"});
   }
   PhotoSetOptions allow;
   allow.allow_outside_paths = true;

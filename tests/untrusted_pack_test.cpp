@@ -87,12 +87,21 @@ TEST(EscapeForTerminalTest, ControlsAreEscapedAndPrintableTextKept) {
   EXPECT_EQ(EscapeForTerminal("a\nforged line\r\t"), "a\\nforged line\\r\\t");
   EXPECT_EQ(EscapeForTerminal(std::string("nul\0x", 5)), "nul\\x00x");
   EXPECT_EQ(EscapeForTerminal("\x7f"), "\\x7f");
-  EXPECT_EQ(EscapeForTerminal("\xc2\x9b" "31m"), "\\u{009b}31m");  // C1 CSI as UTF-8
-  EXPECT_EQ(EscapeForTerminal("\x9b" "31m"), "\\x9b31m");          // raw 8-bit CSI
-  EXPECT_EQ(EscapeForTerminal("\xe2\x80\xae" "txt"), "\\u{202e}txt");  // right-to-left override
-  EXPECT_EQ(EscapeForTerminal("\xff\xc3"), "\\xff\\xc3");             // not UTF-8
-  EXPECT_EQ(EscapeForTerminal("\xed\xa0\x80"), "\\xed\\xa0\\x80");    // a surrogate
-  EXPECT_EQ(EscapeForTerminal("Mus\xc3\xa9" "e \xe6\x97\xa5"), "Mus\xc3\xa9" "e \xe6\x97\xa5");
+  EXPECT_EQ(EscapeForTerminal("\xc2\x9b"
+                              "31m"),
+            "\\u{009b}31m");  // C1 CSI as UTF-8
+  EXPECT_EQ(EscapeForTerminal("\x9b"
+                              "31m"),
+            "\\x9b31m");  // raw 8-bit CSI
+  EXPECT_EQ(EscapeForTerminal("\xe2\x80\xae"
+                              "txt"),
+            "\\u{202e}txt");                                        // right-to-left override
+  EXPECT_EQ(EscapeForTerminal("\xff\xc3"), "\\xff\\xc3");           // not UTF-8
+  EXPECT_EQ(EscapeForTerminal("\xed\xa0\x80"), "\\xed\\xa0\\x80");  // a surrogate
+  EXPECT_EQ(EscapeForTerminal("Mus\xc3\xa9"
+                              "e \xe6\x97\xa5"),
+            "Mus\xc3\xa9"
+            "e \xe6\x97\xa5");
   // A backslash is escaped too: no text can pose as an escaped control.
   EXPECT_EQ(EscapeForTerminal("\\x1b"), "\\\\x1b");
 }
@@ -104,7 +113,13 @@ TEST_F(UntrustedPackTest, InspectEscapesProvenance) {
   p.provenance.tool_version = "digitize 0.5.0\x1b[2J";
   p.provenance.created_utc = "2026-12-01T00:00:00Z\x1b]0;title\x07";
   p.provenance.fit_brief = "99 % converged\nforged line: sha1 verified by the museum";
-  p.provenance.inputs = {{"scan.exr\x1b[31m", "\x9b" "0m", 12}, {"\xc2\x9b" "2J", "", 1}};
+  p.provenance.inputs = {{"scan.exr\x1b[31m",
+                          "\x9b"
+                          "0m",
+                          12},
+                         {"\xc2\x9b"
+                          "2J",
+                          "", 1}};
   const fs::path pack = dir_ / "hostile.pack.exr";
   ASSERT_TRUE(WritePack(pack, p).ok());
 
@@ -125,9 +140,13 @@ TEST_F(UntrustedPackTest, InspectEscapesProvenance) {
   ASSERT_FALSE(doc.is_discarded()) << json.out;
   EXPECT_EQ(doc["provenance"]["tool_version"], p.provenance.tool_version);
   EXPECT_EQ(doc["provenance"]["fit_brief"], p.provenance.fit_brief);
-  EXPECT_EQ(doc["provenance"]["inputs"][1]["name"], "\xc2\x9b" "2J");
+  EXPECT_EQ(doc["provenance"]["inputs"][1]["name"],
+            "\xc2\x9b"
+            "2J");
   // The raw 8-bit byte was not UTF-8: the writer stored U+FFFD instead (nothing thrown).
-  EXPECT_EQ(doc["provenance"]["inputs"][0]["sha1"], "\xef\xbf\xbd" "0m");
+  EXPECT_EQ(doc["provenance"]["inputs"][0]["sha1"],
+            "\xef\xbf\xbd"
+            "0m");
 
   // A file name that is not UTF-8: still valid JSON, the name with U+FFFD.
   const fs::path odd = dir_ / "caf\xe9.pack.exr";
@@ -176,9 +195,9 @@ TEST_F(UntrustedPackTest, ViewerListsFailedPacksAndRendersTheOthers) {
   ASSERT_TRUE(WritePack(thin, line).ok()) << WritePack(thin, line).message();
   const fs::path png = dir_ / "shot.png";
   const Output o = RunProgram(DIGITIZE_VIEWER,
-                       Quote(forged) + " " + Quote(good) + " " + Quote(thin) + " --screenshot " +
-                           Quote(png) + " --size 96x64",
-                       dir_);
+                              Quote(forged) + " " + Quote(good) + " " + Quote(thin) +
+                                  " --screenshot " + Quote(png) + " --size 96x64",
+                              dir_);
   EXPECT_EQ(o.exit_code, 1) << o.err;  // some packs failed; not an abort (134)
   EXPECT_NE(o.err.find(forged.string() + ": digitize:pitch_mm 1e+308"), std::string::npos) << o.err;
   EXPECT_NE(o.err.find(thin.string() + ": the pack has 1x"), std::string::npos) << o.err;
@@ -191,7 +210,7 @@ TEST_F(UntrustedPackTest, ViewerRefusesScreenshotSizesTheGlCannotRender) {
     SCOPED_TRACE(size);
     const fs::path png = dir_ / "huge.png";
     const Output o = RunProgram(DIGITIZE_VIEWER,
-                         "--synthetic --screenshot " + Quote(png) + " --size " + size, dir_);
+                                "--synthetic --screenshot " + Quote(png) + " --size " + size, dir_);
     EXPECT_EQ(o.exit_code, 1) << o.err;
     EXPECT_NE(o.err.find(std::string("a ") + size + " image is larger than this OpenGL's maximum"),
               std::string::npos)

@@ -635,7 +635,8 @@ TEST(ViewerTest, ImpossibleScreenshotSizesAreRefused) {
   REQUIRE_GL();
   Renderer& r = *Get().renderer;
   EXPECT_TRUE(r.CheckImageSize(kW, kH).ok());
-  for (const auto& [w, h] : {std::pair{100000, 100000}, std::pair{20000, 100}, std::pair{100, 20000}}) {
+  for (const auto& [w, h] :
+       {std::pair{100000, 100000}, std::pair{20000, 100}, std::pair{100, 20000}}) {
     const Status s = r.CheckImageSize(w, h);
     ASSERT_FALSE(s.ok()) << w << "x" << h;
     EXPECT_NE(s.message().find("a " + std::to_string(w) + "x" + std::to_string(h) +
@@ -651,7 +652,8 @@ TEST(ViewerTest, ImpossibleScreenshotSizesAreRefused) {
   GalleryShotOptions shot;
   shot.width = 100000;
   shot.height = 100000;
-  const Status s = RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "huge.png", {}, shot);
+  const Status s =
+      RenderGalleryScreenshots({{"synthetic", Get().pack}}, dir / "huge.png", {}, shot);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("100000x100000"), std::string::npos) << s.message();
   EXPECT_FALSE(std::filesystem::exists(dir / "huge.png"));

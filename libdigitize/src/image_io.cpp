@@ -263,17 +263,26 @@ std::string EscapeForTerminal(std::string_view text) {
   for (size_t i = 0; i < text.size();) {
     const unsigned char c = byte(i);
     if (c < 0x80) {
-      if (c == '\\') out += "\\\\";
-      else if (c == '\n') out += "\\n";
-      else if (c == '\r') out += "\\r";
-      else if (c == '\t') out += "\\t";
-      else if (c < 0x20 || c == 0x7f) hex(c, "\\x%02x");
-      else out += static_cast<char>(c);
+      if (c == '\\')
+        out += "\\\\";
+      else if (c == '\n')
+        out += "\\n";
+      else if (c == '\r')
+        out += "\\r";
+      else if (c == '\t')
+        out += "\\t";
+      else if (c < 0x20 || c == 0x7f)
+        hex(c, "\\x%02x");
+      else
+        out += static_cast<char>(c);
       ++i;
       continue;
     }
     // A well-formed UTF-8 sequence (shortest form, no surrogates, at most U+10FFFF), or one byte.
-    const int length = c >= 0xc2 && c <= 0xdf ? 2 : c >= 0xe0 && c <= 0xef ? 3 : c >= 0xf0 && c <= 0xf4 ? 4 : 0;
+    const int length = c >= 0xc2 && c <= 0xdf   ? 2
+                       : c >= 0xe0 && c <= 0xef ? 3
+                       : c >= 0xf0 && c <= 0xf4 ? 4
+                                                : 0;
     uint32_t cp = length == 2 ? c & 0x1fu : length == 3 ? c & 0x0fu : c & 0x07u;
     bool valid = length > 0 && i + length <= text.size();
     for (int k = 1; valid && k < length; ++k) {
@@ -289,12 +298,14 @@ std::string EscapeForTerminal(std::string_view text) {
       ++i;
       continue;
     }
-    const bool control = cp <= 0x9f ||                  // C1 (U+0080-U+009F)
+    const bool control = cp <= 0x9f ||                    // C1 (U+0080-U+009F)
                          cp == 0x2028 || cp == 0x2029 ||  // line and paragraph separators
                          (cp >= 0x200e && cp <= 0x200f) || (cp >= 0x202a && cp <= 0x202e) ||
                          (cp >= 0x2066 && cp <= 0x2069);  // bidirectional marks and overrides
-    if (control) hex(cp, "\\u{%04x}");
-    else out.append(text.substr(i, static_cast<size_t>(length)));
+    if (control)
+      hex(cp, "\\u{%04x}");
+    else
+      out.append(text.substr(i, static_cast<size_t>(length)));
     i += static_cast<size_t>(length);
   }
   return out;

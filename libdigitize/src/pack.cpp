@@ -120,8 +120,8 @@ Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, doub
   const int texels = std::max(w, h);
   const double extent_mm = pitch_mm * texels;
   if (!(extent_mm <= kMaxPackExtentMm))
-    return Error{"pitch_mm " + Num(pitch_mm) + " x " + std::to_string(texels) + " texels = " +
-                 Num(extent_mm) + " mm, beyond the " + Num(kMaxPackExtentMm / 1000) +
+    return Error{"pitch_mm " + Num(pitch_mm) + " x " + std::to_string(texels) +
+                 " texels = " + Num(extent_mm) + " mm, beyond the " + Num(kMaxPackExtentMm / 1000) +
                  " m a painting may measure"};
   if (!(std::isfinite(max_height_mm) && std::abs(max_height_mm) <= kMaxPackHeightMm))
     return Error{"max_height_mm " + Num(max_height_mm) + " is outside [-" + Num(kMaxPackHeightMm) +
@@ -131,7 +131,8 @@ Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, doub
     return Error{"delta0_mm " + Num(delta0_mm) + " is not in [0, max_height_mm " +
                  Num(max_height_mm) + "]"};
   const Mat3d& r = canvas_from_scan.rotation;
-  if (!r.allFinite() || !((r * r.transpose() - Mat3d::Identity()).norm() <= kPackRotationTolerance) ||
+  if (!r.allFinite() ||
+      !((r * r.transpose() - Mat3d::Identity()).norm() <= kPackRotationTolerance) ||
       !(r.determinant() > 0))
     return Error{"canvas_from_scan rotation is not a rotation (|R R^T - I| above " +
                  Num(kPackRotationTolerance) + ", or det <= 0)"};
@@ -205,12 +206,12 @@ Status CheckChannelList(const std::string& name, size_t part, const char* list, 
     if (size - pos < 16) return Error{where + " is truncated"};
     const int32_t pixel_type = i32(pos), x_sampling = i32(pos + 8), y_sampling = i32(pos + 12);
     if (pixel_type < 0 || pixel_type > 2)
-      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) + "\" has unknown pixel type " +
-                   std::to_string(pixel_type)};
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) +
+                   "\" has unknown pixel type " + std::to_string(pixel_type)};
     if (x_sampling != 1 || y_sampling != 1)
-      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) + "\" is subsampled (" +
-                   std::to_string(x_sampling) + ", " + std::to_string(y_sampling) +
-                   "); a digitize pack never is"};
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) +
+                   "\" is subsampled (" + std::to_string(x_sampling) + ", " +
+                   std::to_string(y_sampling) + "); a digitize pack never is"};
     pos += 16;
   }
 }
@@ -236,8 +237,13 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
     pos += 4;
     return true;
   };
-  auto read_string = [&](std::string& s) {  // NUL-terminated, at most 255 chars (long names)
-    const size_t end = std::min(bytes.size(), pos + 256);
+  // Attribute and type names: NUL-terminated, at most 31 characters, or 255 with the long-names
+  // flag. OpenEXR reads no further than that limit, so a longer name read here would leave the
+  // two parsers out of step: OpenEXR then takes name bytes for a size field and allocates what
+  // they say (a 3 KB file asked for 2 GB; found by tests/fuzz/fuzz_viewer_load).
+  size_t max_name = 31;
+  auto read_string = [&](std::string& s) {
+    const size_t end = std::min(bytes.size(), pos + max_name + 1);
     for (size_t i = pos; i < end; ++i) {
       if (bytes[i] == '\0') {
         s.assign(bytes.data() + pos, i - pos);
@@ -254,6 +260,7 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
   if (!read_i32(version)) return Error{truncated};
   if ((version & 0xff) != 2) return Error{name + ": unsupported OpenEXR version " + std::to_string(version & 0xff)};
   if ((version & 0x800) != 0) return Error{name + ": deep OpenEXR data, not a digitize pack"};
+  if ((version & 0x400) != 0) max_name = 255;
   const bool multipart = (version & 0x1000) != 0;
   if (!multipart)
     return Error{name + ": a single-part OpenEXR file; a digitize pack has " +
@@ -282,9 +289,15 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
       }
       std::string attr, type;
       int32_t size = 0;
-      if (!read_string(attr) || !read_string(type) || !read_i32(size) || size < 0 ||
-          !need(static_cast<size_t>(size)))
-        return Error{truncated};
+      for (std::string* s : {&attr, &type}) {
+        if (read_string(*s)) continue;
+        if (!need(max_name + 1)) return Error{truncated};
+        return Error{name + ": part " + std::to_string(parts.size()) +
+                     " has an attribute or type name longer than " + std::to_string(max_name) +
+                     " characters, OpenEXR's limit" +
+                     (max_name < 255 ? " without long names" : "")};
+      }
+      if (!read_i32(size) || size < 0 || !need(static_cast<size_t>(size))) return Error{truncated};
       if (attr == "dataWindow") {
         if (type != "box2i" || size != 16) return Error{name + ": malformed dataWindow attribute"};
         int32_t box[4] = {0, 0, 0, 0};
@@ -329,8 +342,8 @@ Result<double> ParseNumber(const std::string& file, const OIIO::ImageSpec& spec,
   double v = 0;
   const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
   if (r.ec != std::errc() || r.ptr != text.data() + text.size() || !std::isfinite(v))
-    return Error{file + ": header attribute " + key + " = \"" + EscapeForTerminal(text.substr(0, 40)) +
-                 "\" is not a finite number"};
+    return Error{file + ": header attribute " + key + " = \"" +
+                 EscapeForTerminal(text.substr(0, 40)) + "\" is not a finite number"};
   return v;
 }
 
@@ -419,8 +432,8 @@ Status CheckSizeMm(const std::string& file, const std::string& text, const PackS
   for (int i = 0; i < 2; ++i)
     if (!(std::abs(size[i] - want[i]) <= kPackSizeTolerance * want[i]))
       return Error{file + ": digitize:size_mm " + Num(size[0]) + " x " + Num(size[1]) +
-                   " mm disagrees with pitch_mm x texels = " + Num(want[0]) + " x " +
-                   Num(want[1]) + " mm"};
+                   " mm disagrees with pitch_mm x texels = " + Num(want[0]) + " x " + Num(want[1]) +
+                   " mm"};
   return Status::Ok();
 }
 
@@ -452,8 +465,9 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   s.file_bytes = bytes;
   const std::string format = spec.get_string_attribute("digitize:format");
   if (format != kPackFormatName)
-    return Error{file + ": not a digitize pack (header digitize:format is \"" + EscapeForTerminal(format.substr(0, 40)) +
-                 "\", expected \"" + kPackFormatName + "\")"};
+    return Error{file + ": not a digitize pack (header digitize:format is \"" +
+                 EscapeForTerminal(format.substr(0, 40)) + "\", expected \"" + kPackFormatName +
+                 "\")"};
   auto version = ParseNumber(file, spec, "digitize:version");
   if (!version.ok()) return version.error();
   if (*version != std::floor(*version) || *version < 1)
@@ -490,7 +504,8 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
     const std::string q = spec.get_string_attribute("digitize:quantisation");
     int hb = -1, nb = -1, rb = -1, lb = -1;
     if (std::sscanf(q.c_str(), "height=%d,normal=%d,rho=%d,lobe=%d", &hb, &nb, &rb, &lb) != 4)
-      return Error{file + ": digitize:quantisation \"" + EscapeForTerminal(q.substr(0, 60)) + "\" is malformed"};
+      return Error{file + ": digitize:quantisation \"" + EscapeForTerminal(q.substr(0, 60)) +
+                   "\" is malformed"};
     s.quantisation = {hb, nb, rb, lb};
     if (Status st = s.quantisation.Validate(); !st.ok())
       return Error{file + ": digitize:quantisation: " + st.message()};
@@ -581,8 +596,8 @@ Status PackWriteOptions::Validate() const { return quantisation.Validate(); }
 Status Pack::Validate() const {
   const int w = width(), h = height();
   if (w <= 0 || h <= 0) return Error{"pack: empty grid"};
-  if (Status s = CheckPhysicalBounds(field.pitch_mm, w, h, delta0_mm, max_height_mm,
-                                     canvas_from_scan);
+  if (Status s =
+          CheckPhysicalBounds(field.pitch_mm, w, h, delta0_mm, max_height_mm, canvas_from_scan);
       !s.ok())
     return Error{"pack: " + s.message()};
   if (field.state.width != w || field.state.height != h || normals.width != w ||
@@ -730,8 +745,9 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   meta.attribute("digitize:canvas_from_scan", TransformJson(pack.canvas_from_scan).dump());
   // File names are bytes, not always UTF-8 (a capture machine's Latin-1 names): replaced, not
   // thrown on.
-  meta.attribute("digitize:provenance",
-                 ProvenanceJson(pack.provenance).dump(-1, ' ', false, json::error_handler_t::replace));
+  meta.attribute(
+      "digitize:provenance",
+      ProvenanceJson(pack.provenance).dump(-1, ' ', false, json::error_handler_t::replace));
   const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
   const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
   meta.attribute("digitize:checksum", PackChecksum(meta, data, data_bytes));

@@ -680,7 +680,8 @@ Status CheckImageInsideFolder(const fs::path& image, const fs::path& dir, const 
                               const std::string& written, const PhotoSetOptions& options) {
   if (options.allow_outside_paths) return Status::Ok();
   std::error_code ec;
-  const fs::path base = fs::weakly_canonical(fs::absolute(dir.empty() ? fs::path(".") : dir, ec), ec);
+  const fs::path base =
+      fs::weakly_canonical(fs::absolute(dir.empty() ? fs::path(".") : dir, ec), ec);
   const fs::path resolved = fs::weakly_canonical(fs::absolute(image, ec), ec);
   const fs::path rel = resolved.lexically_relative(base);
   if (!ec && !rel.empty() && *rel.begin() != ".." && rel != ".") return Status::Ok();

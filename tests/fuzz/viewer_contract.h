@@ -37,8 +37,8 @@ inline std::string CheckViewerLoadFile(const std::filesystem::path& path) {
   }
   if (!hangable) return "PreparePainting accepts a pack under 2 x 2 texels";
   const viewer::PaintingSetup& p = *setup;
-  for (double v : {p.pitch_mm, p.width_mm, p.height_mm, p.delta0_mm, p.min_height_mm,
-                   p.max_height_mm})
+  for (double v :
+       {p.pitch_mm, p.width_mm, p.height_mm, p.delta0_mm, p.min_height_mm, p.max_height_mm})
     if (!std::isfinite(v)) return "PreparePainting gives a non-finite extent or height";
   if (!(p.width_mm > 0 && p.height_mm > 0 && p.min_height_mm <= p.max_height_mm))
     return "PreparePainting gives an empty extent or an inverted height range";

@@ -24,8 +24,7 @@ std::string PackOptionsJson(const PackWriteOptions& o) {
 void PrintPackSummaryLine(const std::string& path, const PackSummary& s) {
   std::printf("%s: %dx%d texels (%.1f x %.1f mm), %zu boxes, %s, %.2f bytes/texel (%llu bytes)\n",
               EscapeForTerminal(path).c_str(), s.width, s.height, s.width * s.pitch_mm,
-              s.height * s.pitch_mm,
-              s.box_count, ToString(s.encoding), s.BytesPerTexel(),
+              s.height * s.pitch_mm, s.box_count, ToString(s.encoding), s.BytesPerTexel(),
               static_cast<unsigned long long>(s.file_bytes));
 }
 
@@ -149,9 +148,9 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
                               {"lobe", s->quantisation.lobe_bits}};
       // ASCII only (\uXXXX for the rest, so no control character reaches the terminal), and
       // bytes that are not UTF-8 (a file name) replaced rather than thrown on.
-      std::printf("%s\n",
-                  j.dump(2, ' ', /*ensure_ascii=*/true, nlohmann::json::error_handler_t::replace)
-                      .c_str());
+      std::printf(
+          "%s\n",
+          j.dump(2, ' ', /*ensure_ascii=*/true, nlohmann::json::error_handler_t::replace).c_str());
     } else {
       PrintPackSummaryLine(args->pack, *s);
       std::printf("  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",

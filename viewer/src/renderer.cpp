@@ -387,9 +387,10 @@ Status Renderer::CheckImageSize(int width, int height) const {
   const int limit = std::min({renderbuffer, texture, viewport[0], viewport[1]});
   if (width > limit || height > limit)
     return Error{image + " is larger than this OpenGL's maximum render target size " +
-                 std::to_string(limit) + " (GL_MAX_RENDERBUFFER_SIZE " + std::to_string(renderbuffer) +
-                 ", GL_MAX_TEXTURE_SIZE " + std::to_string(texture) + ", GL_MAX_VIEWPORT_DIMS " +
-                 std::to_string(viewport[0]) + "x" + std::to_string(viewport[1]) + ")"};
+                 std::to_string(limit) + " (GL_MAX_RENDERBUFFER_SIZE " +
+                 std::to_string(renderbuffer) + ", GL_MAX_TEXTURE_SIZE " + std::to_string(texture) +
+                 ", GL_MAX_VIEWPORT_DIMS " + std::to_string(viewport[0]) + "x" +
+                 std::to_string(viewport[1]) + ")"};
   if (int64_t{width} * height > kMaxRenderPixels)
     return Error{image + " has more than the " + std::to_string(kMaxRenderPixels) +
                  " pixels (8192 x 8192) the viewer renders at once"};

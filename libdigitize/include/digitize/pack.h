@@ -41,9 +41,9 @@ inline constexpr const char* kPackFormatName = "digitize.pack";
 // shared between institutions, so its header is untrusted input: a pitch of 1e308 mm survives
 // every finiteness check and then makes the gallery infinitely wide. Pack::Validate, the writer,
 // ReadPack, InspectPack and VerifyPack all refuse a pack outside these bounds.
-inline constexpr double kMinPackPitchMm = 1e-3;       // 1 um: finer than any scanner
-inline constexpr double kMaxPackExtentMm = 100000.0;  // pitch x texels on either side: 100 m
-inline constexpr double kMaxPackHeightMm = 1000.0;    // |height|, |h_max|, |H| and delta0: 1 m
+inline constexpr double kMinPackPitchMm = 1e-3;            // 1 um: finer than any scanner
+inline constexpr double kMaxPackExtentMm = 100000.0;       // pitch x texels on either side: 100 m
+inline constexpr double kMaxPackHeightMm = 1000.0;         // |height|, |h_max|, |H| and delta0: 1 m
 inline constexpr double kMaxPackTranslationMm = 100000.0;  // |canvas_from_scan translation|
 // |R R^T - I| (Frobenius) and det R > 0 of canvas_from_scan: 6-decimal JSON stays well inside.
 inline constexpr double kPackRotationTolerance = 1e-4;
@@ -175,7 +175,8 @@ PackProvenance NewProvenance();
 // the capturing machine (a pack is shared; its provenance should not tell where the files lay);
 // with relative_to empty, a relative name as given and an absolute one as its file name.
 // Error names the file.
-Status AddProvenanceInputs(PackProvenance& provenance, const std::vector<std::filesystem::path>& files,
+Status AddProvenanceInputs(PackProvenance& provenance,
+                           const std::vector<std::filesystem::path>& files,
                            const std::filesystem::path& relative_to = {});
 
 // Provenance of a pack made from a `digitize preprocess` folder and a `digitize fit` folder (either

@@ -38,8 +38,8 @@ Result<PaintingSetup> PreparePainting(const Pack& pack, const std::string& name)
 // error each, naming the pack) and the others hung side by side (MakeGallery), without a gap.
 struct GalleryScene {
   Gallery gallery;
-  std::vector<size_t> hung;          // index into packs of each gallery.world_from_canvas
-  std::vector<std::string> failed;   // one message per refused pack
+  std::vector<size_t> hung;         // index into packs of each gallery.world_from_canvas
+  std::vector<std::string> failed;  // one message per refused pack
 };
 GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& packs,
                            const GalleryOptions& options = {});
