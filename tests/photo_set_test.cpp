@@ -715,6 +715,17 @@ TEST_F(LpTest, PitchFromResolutionTagsElseSaidToBeAssumed) {
   EXPECT_EQ(set->rti_pitch_mm, kRtiAssumedPitchMm);
   EXPECT_TRUE(set->rti_pitch_assumed);
   EXPECT_NE(set->rti_pitch_source.find("8 x 6 mm"), std::string::npos) << set->rti_pitch_source;
+  // A camera's 72 (or 96) per inch is a software default, not the canvas's scale: assumed, and
+  // said why.
+  for (float dpi : {72.0f, 96.0f}) {
+    write_tagged("default.jpg", dpi, "in");
+    set = ReadLp("2\ndefault.jpg 0 0 1\ni1.png 0.6 0 0.8\n");
+    ASSERT_TRUE(set.ok()) << set.error().message;
+    EXPECT_EQ(set->rti_pitch_mm, kRtiAssumedPitchMm) << dpi;
+    EXPECT_TRUE(set->rti_pitch_assumed) << dpi;
+    EXPECT_NE(set->rti_pitch_source.find("software default"), std::string::npos)
+        << set->rti_pitch_source;
+  }
   // A negative or non-finite pitch is refused by name.
   given.rti_pixel_pitch_mm = -1;
   ExpectError(ReadRtiCapture(Path("dirs.lp"), given), {"rti_pixel_pitch_mm"});

@@ -117,4 +117,26 @@ TEST_F(ViewerCliTest, CameraPathNamesTheFilesItWritesIntoANewFolder) {
   EXPECT_NE(one.text.find("wrote new/one.png"), std::string::npos) << one.text;
 }
 
+// Headless without --screenshot used to write gallery.png into the current folder, over a file of
+// that name; every usage error exits 1 (CLI11's codes were 105, 109, ...; --technique and --size 2).
+TEST_F(ViewerCliTest, HeadlessNeedsAScreenshotNameAndUsageErrorsExitOne) {
+  std::ofstream(Path("gallery.png")) << "the user's own picture";
+  const Output out = RunViewer("--synthetic");
+  EXPECT_EQ(out.exit_code, 1) << out.text;
+  EXPECT_NE(out.text.find("no display"), std::string::npos) << out.text;
+  EXPECT_NE(out.text.find("--screenshot"), std::string::npos) << out.text;
+  std::ifstream in(Path("gallery.png"));
+  std::string kept;
+  std::getline(in, kept);
+  EXPECT_EQ(kept, "the user's own picture");
+  for (const char* args : {"--synthetic --bogus", "--synthetic --technique nope --screenshot s.png",
+                           "--synthetic --size 12 --screenshot s.png",
+                           "--synthetic --window-frames x"}) {
+    const Output bad = RunViewer(args);
+    EXPECT_EQ(bad.exit_code, 1) << args << "\n" << bad.text;
+    EXPECT_FALSE(fs::exists(Path("s.png"))) << args;
+  }
+  EXPECT_EQ(RunViewer("--help").exit_code, 0);
+}
+
 }  // namespace

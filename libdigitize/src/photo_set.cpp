@@ -985,6 +985,18 @@ Result<PhotoSet> ReadCalibration(const fs::path& json_path, const PhotoSetOption
   return set;
 }
 
+namespace {
+
+// 72 and 96 per inch are what cameras and image software write when they know no scale: a
+// camera's RTI photos tagged so do not show the canvas at 0.35 or 0.26 mm per pixel.
+bool IsPlaceholderResolution(double mm_per_pixel) {
+  for (double dpi : {72.0, 96.0})
+    if (std::abs(mm_per_pixel - 25.4 / dpi) < 1e-6 * mm_per_pixel) return true;
+  return false;
+}
+
+}  // namespace
+
 Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& options,
                                 const ProgressCallback& progress) {
   if (Status s = options.Validate(); !s) return Error{s.message()};
@@ -1029,13 +1041,18 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
   if (options.rti_pixel_pitch_mm > 0) {
     set.rti_pitch_mm = options.rti_pixel_pitch_mm;
     set.rti_pitch_source = "given (rti_pixel_pitch_mm)";
-  } else if (tagged_mm_per_pixel > 0 && std::isfinite(tagged_mm_per_pixel)) {
+  } else if (tagged_mm_per_pixel > 0 && std::isfinite(tagged_mm_per_pixel) &&
+             !IsPlaceholderResolution(tagged_mm_per_pixel)) {
     set.rti_pitch_mm = tagged_mm_per_pixel;
     set.rti_pitch_source = "from " + tag;
   } else {
     set.rti_pitch_mm = kRtiAssumedPitchMm;
     set.rti_pitch_assumed = true;
-    set.rti_pitch_source = "assumed: the images have no resolution tag, so the physical size (" +
+    const std::string why = tagged_mm_per_pixel > 0
+                                ? "the images' " + tag.substr(tag.find("resolution tag")) +
+                                      " is a software default, not the canvas's scale"
+                                : "the images have no resolution tag";
+    set.rti_pitch_source = "assumed: " + why + ", so the physical size (" +
                            Num(width * kRtiAssumedPitchMm) + " x " +
                            Num(height * kRtiAssumedPitchMm) + " mm) is made up";
   }

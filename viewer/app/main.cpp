@@ -264,14 +264,19 @@ int main(int argc, char** argv) {
   app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
   app.add_option("--window-shot", window_shot,
                  "window: write the last frame (panel included) here (.png, .jpg, .tif, .exr)");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // --help is exit 0; every usage error is 1, as for `digitize`.
+    return app.exit(e) == 0 ? 0 : 1;
+  }
 
   RenderOptions options;
   options.ambient = 0.05;
   auto t = ParseTechnique(technique);
   if (!t) {
     std::fprintf(stderr, "digitize-viewer: %s\n", t.error().message.c_str());
-    return 2;
+    return 1;
   }
   options.technique = *t;
   options.alpha_heatmap = heatmap;
@@ -310,8 +315,14 @@ int main(int argc, char** argv) {
   }
 
   const bool has_display = std::getenv("DISPLAY") || std::getenv("WAYLAND_DISPLAY");
-  if (!screenshot.empty() || !camera_path.empty() || !has_display) {
-    if (screenshot.empty()) screenshot = "gallery.png";
+  if (screenshot.empty() && (!camera_path.empty() || !has_display)) {
+    // Headless needs a file to write: a default name could overwrite a user's file.
+    std::fprintf(stderr, "digitize-viewer: %s; give --screenshot FILE.png to render headless\n",
+                 has_display ? "--camera-path writes screenshots"
+                             : "no display (DISPLAY and WAYLAND_DISPLAY are unset)");
+    return 1;
+  }
+  if (!screenshot.empty()) {
     GalleryShotOptions shot;
     shot.render = options;
     shot.inputs.assign(paths.begin(), paths.end());
@@ -319,7 +330,7 @@ int main(int argc, char** argv) {
     if (std::sscanf(size.c_str(), "%dx%d", &shot.width, &shot.height) != 2 || shot.width <= 0 ||
         shot.height <= 0) {
       std::fprintf(stderr, "digitize-viewer: --size must be WxH, got '%s'\n", size.c_str());
-      return 2;
+      return 1;
     }
     std::vector<ViewCamera> path;
     if (!camera_path.empty()) {
@@ -331,12 +342,13 @@ int main(int argc, char** argv) {
       path = *p;
     }
     const size_t loaded = errors.size();
-    if (Status s = RenderGalleryScreenshots(packs, screenshot, path, shot, &errors); !s.ok()) {
-      std::fprintf(stderr, "digitize-viewer: %s\n", s.message().c_str());
-      return 1;
-    }
+    const Status shot_status = RenderGalleryScreenshots(packs, screenshot, path, shot, &errors);
     for (size_t i = loaded; i < errors.size(); ++i)
       std::fprintf(stderr, "digitize-viewer: %s\n", errors[i].c_str());
+    if (!shot_status.ok()) {
+      std::fprintf(stderr, "digitize-viewer: %s\n", shot_status.message().c_str());
+      return 1;
+    }
     const size_t frames = std::max<size_t>(path.size(), 1);
     std::printf("wrote %s", ScreenshotPath(screenshot, 0, frames).c_str());
     if (frames > 1)

@@ -100,6 +100,10 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   if (!refused.empty()) {
     if (failed == nullptr) return Error{refused.front()};
     failed->insert(failed->end(), refused.begin(), refused.end());
+    // An empty room would hide that nothing could be shown.
+    if (refused.size() == packs.size())
+      return Error{"none of the " + std::to_string(packs.size()) +
+                   " painting(s) could be hung; nothing written"};
   }
   (*renderer)->SetSceneBoxes(g.boxes);
   // As every other command: a missing output folder is made (only now, when all is ready).
