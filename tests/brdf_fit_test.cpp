@@ -463,7 +463,7 @@ TEST(BrdfFit, MeasuredPaintIsApproximated) {
   // paints and felt (per-channel lobe shapes, retro-reflection). The fit must stay finite, beat
   // a diffuse-only fit, and its relighting error is reported (issue 3 asks for the figure).
   const std::filesystem::path path =
-      std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "shared" /
+      std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" /
       "data" / "lafortune_measured_fits.txt";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "no " << path;
   Result<std::vector<MeasuredLafortune>> fits = ReadMeasuredLafortuneFits(path);

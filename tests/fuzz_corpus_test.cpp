@@ -30,7 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 
 fs::path CorpusDir(const std::string& target) {
-  return fs::path(DIGITIZE_TESTS_DIR) / "fuzz" / "corpus" / target;
+  return fs::path(DIGITIZE_SOURCE_DIR) / "tests" / "fuzz" / "corpus" / target;
 }
 
 std::vector<fs::path> CorpusFiles(const std::string& target) {

@@ -268,7 +268,7 @@ TEST(Lafortune, ValidateNamesTheField) {
 
 // <repo>/tests/lafortune_test.cpp -> <repo>/../shared/data (the project's shared data folder).
 std::filesystem::path MeasuredFitsPath() {
-  return std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "shared" /
+  return std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" /
          "data" / "lafortune_measured_fits.txt";
 }
 

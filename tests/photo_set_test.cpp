@@ -35,7 +35,7 @@ constexpr double kFloatTol = 2e-7;
 
 // <repo>/tests/photo_set_test.cpp -> <repo>/../shared/data/rti_icon
 fs::path RtiIconDir() {
-  return fs::path(__FILE__).parent_path().parent_path().parent_path() / "shared" / "data" /
+  return fs::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" / "data" /
          "rti_icon";
 }
 
