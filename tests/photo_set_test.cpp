@@ -726,9 +726,18 @@ TEST_F(LpTest, PitchFromResolutionTagsElseSaidToBeAssumed) {
     EXPECT_NE(set->rti_pitch_source.find("software default"), std::string::npos)
         << set->rti_pitch_source;
   }
-  // A negative or non-finite pitch is refused by name.
-  given.rti_pixel_pitch_mm = -1;
-  ExpectError(ReadRtiCapture(Path("dirs.lp"), given), {"rti_pixel_pitch_mm"});
+  // A tag of 0.01 per inch (2.54 m per pixel) is no scale either.
+  write_tagged("default.jpg", 0.01f, "in");
+  set = ReadLp("2\ndefault.jpg 0 0 1\ni1.png 0.6 0 0.8\n");
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  EXPECT_TRUE(set->rti_pitch_assumed);
+  EXPECT_NE(set->rti_pitch_source.find("not a plausible scale"), std::string::npos)
+      << set->rti_pitch_source;
+  // A negative, non-finite or absurd pitch is refused by name (1e-300 used to reach the pack).
+  for (double bad : {-1.0, 1e-300, 1e9, std::numeric_limits<double>::quiet_NaN()}) {
+    given.rti_pixel_pitch_mm = bad;
+    ExpectError(ReadRtiCapture(Path("dirs.lp"), given), {"rti_pixel_pitch_mm"});
+  }
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -813,9 +813,10 @@ Status PhotoSetOptions::Validate() const {
     return Error{"max_non_finite_fraction must be in [0, 1], got " + Num(max_non_finite_fraction)};
   }
   if (max_pixels_per_image == 0) return Error{"max_pixels_per_image must be > 0"};
-  if (!(std::isfinite(rti_pixel_pitch_mm) && rti_pixel_pitch_mm >= 0)) {
-    return Error{"rti_pixel_pitch_mm must be > 0 mm (or 0: from the images), got " +
-                 Num(rti_pixel_pitch_mm)};
+  if (!(rti_pixel_pitch_mm == 0 ||
+        (rti_pixel_pitch_mm >= kMinRtiPitchMm && rti_pixel_pitch_mm <= kMaxRtiPitchMm))) {
+    return Error{"rti_pixel_pitch_mm must be " + Num(kMinRtiPitchMm) + " to " + Num(kMaxRtiPitchMm) +
+                 " mm (or 0: from the images), got " + Num(rti_pixel_pitch_mm)};
   }
   if (!(std::isfinite(rti_camera_distance_mm) && rti_camera_distance_mm > 0)) {
     return Error{"rti_camera_distance_mm must be > 0 mm, got " + Num(rti_camera_distance_mm)};
@@ -1041,7 +1042,7 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
   if (options.rti_pixel_pitch_mm > 0) {
     set.rti_pitch_mm = options.rti_pixel_pitch_mm;
     set.rti_pitch_source = "given (rti_pixel_pitch_mm)";
-  } else if (tagged_mm_per_pixel > 0 && std::isfinite(tagged_mm_per_pixel) &&
+  } else if (tagged_mm_per_pixel >= kMinRtiPitchMm && tagged_mm_per_pixel <= kMaxRtiPitchMm &&
              !IsPlaceholderResolution(tagged_mm_per_pixel)) {
     set.rti_pitch_mm = tagged_mm_per_pixel;
     set.rti_pitch_source = "from " + tag;
@@ -1050,7 +1051,11 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
     set.rti_pitch_assumed = true;
     const std::string why = tagged_mm_per_pixel > 0
                                 ? "the images' " + tag.substr(tag.find("resolution tag")) +
-                                      " is a software default, not the canvas's scale"
+                                      (IsPlaceholderResolution(tagged_mm_per_pixel)
+                                           ? " is a software default, not the canvas's scale"
+                                           : " is not a plausible scale (" +
+                                                 Num(kMinRtiPitchMm) + " to " +
+                                                 Num(kMaxRtiPitchMm) + " mm per pixel)")
                                 : "the images have no resolution tag";
     set.rti_pitch_source = "assumed: " + why + ", so the physical size (" +
                            Num(width * kRtiAssumedPitchMm) + " x " +

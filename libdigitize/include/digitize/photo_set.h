@@ -267,6 +267,10 @@ Result<PhotoSet> ReadCalibration(const std::filesystem::path& json_path,
 // else the first image's resolution tag (300 dpi -> 25.4 / 300 mm), else kRtiAssumedPitchMm with
 // rti_pitch_assumed set; rti_pitch_source says which.
 inline constexpr double kRtiAssumedPitchMm = 1.0;  // RTI has no scale: 1 mm per pixel
+// A pixel of an RTI capture spans 1 um to 100 mm of canvas: outside that a pitch (given or tagged)
+// is a typo or a software default, not the canvas's scale.
+inline constexpr double kMinRtiPitchMm = 1e-3;
+inline constexpr double kMaxRtiPitchMm = 100.0;
 Result<PhotoSet> ReadRtiCapture(const std::filesystem::path& lp_path,
                                 const PhotoSetOptions& options = {},
                                 const ProgressCallback& progress = nullptr);
