@@ -99,3 +99,28 @@ TEST(UnlikeScans, IndependentLikeScan) {
 
 }  // namespace
 }  // namespace digitize
+namespace digitize {
+TEST(UnlikeScansDebug, DISABLED_Dump) {
+  synth::PaintingOptions p;
+  synth::ScanSimOptions scan;
+  scan.dropout = 0.30;
+  p.resolution_px = synth::MatchedResolution(p, synth::FrameOptions{}, scan);
+  synth::Painting painting = synth::MakePainting(p);
+  const synth::Scene scene(painting, synth::FrameOptions{});
+  auto s = synth::SimulateScan(scene, scan);
+  auto r = Preprocess(s.exposures, PreprocessOptions{});
+  ASSERT_TRUE(r.ok());
+  const auto& m = r->canvas.mask_scan;
+  int n = 0;
+  for (int y = 0; y < m.height; ++y)
+    for (int x = 0; x < m.width; ++x) {
+      if (!m(x, y)) continue;
+      if (s.hit_scan(x, y) == 2 || s.hit_scan(x, y) == 3) {
+        const Vec3f& q = s.exposures[0].xyz_mm(x, y);
+        Vec3d c = s.canvas_from_scan.Apply(q.cast<double>());
+        if (++n < 40) std::printf("kept (%d,%d) hit %d canvas (%.2f %.2f %.2f) valid %d\n", x, y, s.hit_scan(x, y), c.x(), c.y(), c.z(), IsValid(q));
+      }
+    }
+  std::printf("%d kept, outline %d %s\n", n, r->canvas.outline_fitted, r->canvas.outline_note.c_str());
+}
+}  // namespace digitize
