@@ -3,10 +3,10 @@
 #include "digitize/canvas.h"
 
 #include <gtest/gtest.h>
-#include <Eigen/Geometry>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
 #include <cstdint>

@@ -94,33 +94,53 @@ TEST(UnlikeScans, IndependentLikeScan) {
   EXPECT_GE(a.mask_iou, kMinMaskIou);
   EXPECT_LE(a.extent_error_mm, kMaxExtentErrorMm);
   EXPECT_LE(a.bare_plane_tilt_deg, kMaxBarePlaneTiltDeg);
+  EXPECT_TRUE(run.result->canvas.warnings.empty()) << run.result->canvas.warnings.front();
   RecordProperty("bare_plane_tilt_deg", std::to_string(a.bare_plane_tilt_deg));
 }
 
-}  // namespace
-}  // namespace digitize
-namespace digitize {
-TEST(UnlikeScansDebug, DISABLED_Dump) {
-  synth::PaintingOptions p;
-  synth::ScanSimOptions scan;
-  scan.dropout = 0.30;
-  p.resolution_px = synth::MatchedResolution(p, synth::FrameOptions{}, scan);
-  synth::Painting painting = synth::MakePainting(p);
-  const synth::Scene scene(painting, synth::FrameOptions{});
-  auto s = synth::SimulateScan(scene, scan);
-  auto r = Preprocess(s.exposures, PreprocessOptions{});
-  ASSERT_TRUE(r.ok());
-  const auto& m = r->canvas.mask_scan;
-  int n = 0;
-  for (int y = 0; y < m.height; ++y)
-    for (int x = 0; x < m.width; ++x) {
-      if (!m(x, y)) continue;
-      if (s.hit_scan(x, y) == 2 || s.hit_scan(x, y) == 3) {
-        const Vec3f& q = s.exposures[0].xyz_mm(x, y);
-        Vec3d c = s.canvas_from_scan.Apply(q.cast<double>());
-        if (++n < 40) std::printf("kept (%d,%d) hit %d canvas (%.2f %.2f %.2f) valid %d\n", x, y, s.hit_scan(x, y), c.x(), c.y(), c.z(), IsValid(q));
-      }
-    }
-  std::printf("%d kept, outline %d %s\n", n, r->canvas.outline_fitted, r->canvas.outline_note.c_str());
+TEST(UnlikeScans, BorderHolesDoNotNotchTheMask) {
+  Case c = IndependentLike();
+  c.name = "border holes";
+  c.scan.border_hole_blobs = 40;
+  c.scan.seed = 12;
+  const ScanRun run = RunCase(c);
+  ASSERT_TRUE(run.result.ok()) << run.result.error().message;
+  EXPECT_LE(run.accuracy.axis_error_deg, kMaxAxisErrorDeg);
+  EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou);
+  EXPECT_LE(run.accuracy.extent_error_mm, kMaxExtentErrorMm);
+  EXPECT_TRUE(run.result->canvas.warnings.empty());
 }
+
+TEST(UnlikeScans, OrthographicTiltedAndRotated) {
+  Case c = IndependentLike();
+  c.name = "orthographic";
+  c.scan.model = synth::ScannerModel::kOrthographic;
+  c.scan.tilt_deg = 10, c.scan.tilt_axis_deg = -35, c.scan.roll_deg = -12;
+  c.painting.bow_mm = 0.5;
+  const ScanRun run = RunCase(c);
+  ASSERT_TRUE(run.result.ok()) << run.result.error().message;
+  EXPECT_LE(run.accuracy.axis_error_deg, kMaxAxisErrorDeg);
+  EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou);
+  EXPECT_LE(run.accuracy.extent_error_mm, kMaxExtentErrorMm);
+  EXPECT_LE(run.accuracy.bare_plane_tilt_deg, kMaxBarePlaneTiltDeg);
+  EXPECT_TRUE(run.result->canvas.warnings.empty());
+}
+
+TEST(UnlikeScans, FrameLipIsWarnedAbout) {
+  Case c = IndependentLike();
+  c.name = "lip";
+  c.frame.lip_mm = 6;
+  const ScanRun run = RunCase(c);
+  ASSERT_TRUE(run.result.ok()) << run.result.error().message;
+  const Eigen::Vector2d visible = run.scan.visible_max_mm - run.scan.visible_min_mm;
+  EXPECT_LT(visible.x(), run.painting.width_mm - 5) << "the lip hides a strip of the canvas";
+  EXPECT_LE(run.accuracy.axis_error_deg, kMaxAxisErrorDeg);
+  EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou);
+  EXPECT_LE(run.accuracy.extent_error_mm, kMaxExtentErrorMm);
+  ASSERT_EQ(run.result->canvas.warnings.size(), 1u);
+  EXPECT_NE(run.result->canvas.warnings[0].find("overhangs"), std::string::npos);
+  for (const auto& w : run.result->canvas.warnings) std::printf("warning: %s\n", w.c_str());
+}
+
+}  // namespace
 }  // namespace digitize

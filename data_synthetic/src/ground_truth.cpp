@@ -70,7 +70,8 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
 
   {
     const Vec3d x_est = truth_from_est.rotation.col(0);
-    acc.axis_error_deg = std::abs(std::atan2(x_est.y(), x_est.x())) * 180.0 / 3.14159265358979323846;
+    acc.axis_error_deg =
+        std::abs(std::atan2(x_est.y(), x_est.x())) * 180.0 / 3.14159265358979323846;
     const Eigen::Vector2d visible = scan.visible_max_mm - scan.visible_min_mm;
     acc.extent_error_mm = (result.canvas.extent_mm - visible).cwiseAbs().maxCoeff();
     acc.bare_plane_tilt_deg = AngleDeg(est_cfs.rotation.row(2).transpose(),

@@ -836,8 +836,7 @@ Painting MakePainting(const PaintingOptions& options) {
     const double n = static_cast<double>(w_px) * h_px;
     p.bare_plane_offset_mm = s / n;
     p.bare_plane_slope = Eigen::Vector2d(xx > 0 ? sx / xx : 0, yy > 0 ? sy / yy : 0);
-    p.bare_plane_normal =
-        Vec3d(-p.bare_plane_slope.x(), -p.bare_plane_slope.y(), 1).normalized();
+    p.bare_plane_normal = Vec3d(-p.bare_plane_slope.x(), -p.bare_plane_slope.y(), 1).normalized();
   }
   return p;
 }

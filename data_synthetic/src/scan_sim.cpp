@@ -1,6 +1,8 @@
 // Simulated structured-light scan of a Scene: one ray per scan pixel (traced once, the pose is
 // shared by every exposure), then per exposure its own noise along the ray, random dropouts,
 // blob-shaped holes and rare outliers. See scan_sim.h for the pose and camera conventions.
+#include "digitize_synth/scan_sim.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -11,8 +13,6 @@
 #include <random>
 #include <sstream>
 #include <string>
-
-#include "digitize_synth/scan_sim.h"
 
 namespace digitize::synth {
 namespace {
@@ -140,8 +140,8 @@ Grid<uint8_t> HoleMask(const ScanSimOptions& o, int exposure, const std::vector<
   for (int b = 0; b < o.hole_blobs + border; ++b) {
     double cx = unit(rng) * o.width_px, cy = unit(rng) * o.height_px;
     if (b >= o.hole_blobs) {
-      const size_t k = std::min(outline.size() - 1,
-                                static_cast<size_t>(unit(border_rng) * outline.size()));
+      const size_t k =
+          std::min(outline.size() - 1, static_cast<size_t>(unit(border_rng) * outline.size()));
       cx = outline[k] % o.width_px + 0.5, cy = outline[k] / o.width_px + 0.5;
     }
     double radius = o.hole_blob_radius_px * (0.6 + 0.9 * unit(rng));

@@ -271,8 +271,9 @@ Scene::Scene(const Painting& painting, const FrameOptions& frame)
   Status valid = frame.Validate();
   DIGITIZE_CHECK(valid.ok(), "Scene: " + valid.message());
   DIGITIZE_CHECK(!painting.truth.height_mm.empty(), "Scene: empty painting");
-  DIGITIZE_CHECK(!frame.enabled || 2 * frame.lip_mm < std::min(painting.width_mm, painting.height_mm),
-                 "Scene: frame lip_mm " + Num(frame.lip_mm) + " hides the whole canvas");
+  DIGITIZE_CHECK(
+      !frame.enabled || 2 * frame.lip_mm < std::min(painting.width_mm, painting.height_mm),
+      "Scene: frame lip_mm " + Num(frame.lip_mm) + " hides the whole canvas");
   impl_->device = rtcNewDevice(nullptr);
   DIGITIZE_CHECK(impl_->device != nullptr, "Scene: rtcNewDevice failed");
   rtcSetDeviceErrorFunction(impl_->device, ErrorCallback, &impl_->last_error);

@@ -19,10 +19,14 @@
 //      Sobel's 3x3 support loses without taking wall samples (but those within the noise of the
 //      canvas plane, which no test can tell from canvas). Missing samples the region encloses
 //      stay in the mask.
-//   6. Canvas frame: Z = robust normal, X = the in-plane PCA axis closest to scan +X, origin at
-//      the lower-left corner of the mask points' bounding rectangle, height 0 on the plane.
+//   5b. Outline: the visible canvas as a rectangle in the plane (FitOutline): its sides give the
+//      in-plane axes and the extent, the pixels inside it the mask (dropout notches on the
+//      border filled, bevel feet left out), frame samples lying over it a hidden-edge warning.
+//      Kept out when it disagrees with the grown region (not a rectangle).
+//   6. Canvas frame: Z = robust normal, X = the outline's side direction (else the in-plane PCA
+//      axis) closest to scan +X, origin at the lower-left corner of the outline (sides on the
+//      scan border: of the mask points' bounding rectangle), height 0 on the plane.
 #include "digitize/canvas.h"
-#include "mask_ops.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -41,6 +45,8 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
+
+#include "mask_ops.h"
 
 namespace digitize {
 namespace {
@@ -488,7 +494,6 @@ double MedianSpacing(const Grid<Vec3f>& xyz, const cv::Mat& mask, const LocalFra
   return Median(d);
 }
 
-
 // ---- Outline (step 5b): the visible canvas as a rectangle in the plane.
 //
 // A canvas is a rectangle and what hides it (the frame's edges) runs parallel to its sides, so
@@ -500,11 +505,11 @@ double MedianSpacing(const Grid<Vec3f>& xyz, const cv::Mat& mask, const LocalFra
 // canvas-like samples (mask, within the noise of the local canvas height) from the rest. The
 // mask is then every pixel the rectangle holds, so dropouts at the border do not notch it and
 // samples climbing a bevel or a wall's foot above the canvas height are left out.
-constexpr double kOutlineBandMm = 10;       // side band: this far either side of the first guess
-constexpr double kOutlineBandSpacings = 20;  // ... or this many sample spacings, the larger
+constexpr double kOutlineBandMm = 10;         // side band: this far either side of the first guess
+constexpr double kOutlineBandSpacings = 20;   // ... or this many sample spacings, the larger
 constexpr double kOutlineCornerShare = 0.04;  // side ends left out (corners are rounded by noise)
 constexpr double kOutlineCornerMm = 5;
-constexpr double kOutlineHeightSigmas = 6;    // canvas-like: within this many noise sigmas
+constexpr double kOutlineHeightSigmas = 4;     // canvas-like: within this many noise sigmas
 constexpr double kOutlineHeightFloorMm = 0.1;  // ... or this, of the side's local canvas height
 constexpr int kOutlineMinBins = 20;            // a side needs this many bins with a sample
 constexpr double kOutlineMinSpanShare = 0.3;   // ... spanning this share of its length
@@ -521,15 +526,15 @@ constexpr double kOverhangSpacings = 2.0;
 constexpr double kOverhangShare = 0.2;
 
 struct Outline {
-  bool ok = false;              // rectangle fitted and used for the mask
-  bool angle_ok = false;        // angle from at least one closed side
-  double angle = 0;             // rectangle's first axis in the plane's (u, v), radians
+  bool ok = false;        // rectangle fitted and used for the mask
+  bool angle_ok = false;  // angle from at least one closed side
+  double angle = 0;       // rectangle's first axis in the plane's (u, v), radians
   Eigen::Vector2d centre{0, 0};
   std::array<double, 4> edge{};  // outward offsets from the centre: +x', -x', +y', -y'
   std::array<bool, 4> closed{};
   std::array<bool, 4> overhang{};
-  cv::Mat mask;                 // 255 inside
-  std::string note;             // why it was not used
+  cv::Mat mask;      // 255 inside
+  std::string note;  // why it was not used
 };
 
 // Outward normal of side s in (u, v) for a rectangle at `angle`.
@@ -619,15 +624,15 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   // Samples in the band around the guess, each on its nearest side.
   struct Cand {
     int side;
-    float t, o;           // along the side, outwards (first-guess frame)
-    float u, v;           // where the pixel's ray meets the plane
-    float uo, vo;         // the sample projected on the plane (valid only)
-    float height;         // above the plane (valid only)
+    float t, o;    // along the side, outwards (first-guess frame)
+    float u, v;    // where the pixel's ray meets the plane
+    float uo, vo;  // the sample projected on the plane (valid only)
+    float height;  // above the plane (valid only)
     uint8_t in_mask, usable, scan_border;
   };
   std::array<std::vector<Cand>, 4> side_cands;
-  const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0), SideNormal(2, angle0),
-                                 SideNormal(3, angle0)};
+  const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0),
+                                 SideNormal(2, angle0), SideNormal(3, angle0)};
   for (int y = 0; y < h; ++y) {
     const uint8_t* m = mask.ptr<uint8_t>(y);
     const uint8_t* ok = valid.ptr<uint8_t>(y);
@@ -668,8 +673,9 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     const auto& cands = side_cands[static_cast<size_t>(s)];
     const double e = edge0[static_cast<size_t>(s)];
     half_len[static_cast<size_t>(s)] = s < 2 ? half0[1] : half0[0];
-    const double corner_cut = half_len[static_cast<size_t>(s)] -
-                              std::max(kOutlineCornerMm, kOutlineCornerShare * 2 * half_len[static_cast<size_t>(s)]);
+    const double corner_cut =
+        half_len[static_cast<size_t>(s)] -
+        std::max(kOutlineCornerMm, kOutlineCornerShare * 2 * half_len[static_cast<size_t>(s)]);
     // Height line by trimmed least squares.
     std::vector<const Cand*> inner;
     size_t on_border = 0, in_mask = 0;
@@ -756,7 +762,9 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     weight[static_cast<size_t>(s)] = static_cast<double>(pts.size()) * span * span;
   }
   double wsum = 0, dsum = 0;
-  for (int s = 0; s < 4; ++s) wsum += weight[static_cast<size_t>(s)], dsum += weight[static_cast<size_t>(s)] * delta[static_cast<size_t>(s)];
+  for (int s = 0; s < 4; ++s)
+    wsum += weight[static_cast<size_t>(s)],
+        dsum += weight[static_cast<size_t>(s)] * delta[static_cast<size_t>(s)];
   if (!(wsum > 0)) {
     out.note = "no side of the canvas outline could be fitted";
     return out;
@@ -777,8 +785,9 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     const auto& cands = side_cands[static_cast<size_t>(s)];
     const auto& like = canvas_like[static_cast<size_t>(s)];
     const Eigen::Vector2d n = SideNormal(s, out.angle);
-    const double corner_cut = half_len[static_cast<size_t>(s)] -
-                              std::max(kOutlineCornerMm, kOutlineCornerShare * 2 * half_len[static_cast<size_t>(s)]);
+    const double corner_cut =
+        half_len[static_cast<size_t>(s)] -
+        std::max(kOutlineCornerMm, kOutlineCornerShare * 2 * half_len[static_cast<size_t>(s)]);
     std::vector<std::pair<float, int>> samples;  // (offset, +1 inside / -1 outside)
     double mask_extent = -std::numeric_limits<double>::max();
     for (size_t i = 0; i < cands.size(); ++i) {
@@ -804,18 +813,21 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       cost += samples[k].second > 0 ? -1 : 1;
       if (cost < best) best = cost, best_k = k + 1;
     }
-    double e;
-    if (best_k == 0) e = samples.front().first;
-    else if (best_k == samples.size()) e = samples.back().first;
-    else e = 0.5 * (samples[best_k - 1].first + samples[best_k].first);
+    // The edge at the outermost canvas-like sample of the best split: pixels beyond it up to
+    // the first other sample may be missing samples of a steep wall seen edge-on.
+    const double e = best_k == 0 ? samples.front().first : samples[best_k - 1].first;
     out.edge[static_cast<size_t>(s)] = e;
     // Overhang: frame samples over the visible canvas.
     const double reach = std::max(kOverhangMm, kOverhangSpacings * spacing);
     size_t over = 0;
     for (size_t i = 0; i < cands.size(); ++i) {
       const Cand& c = cands[i];
-      if (!c.usable || like[i] || std::fabs(c.t) >= corner_cut) continue;
-      const double rise = c.height - height_line[static_cast<size_t>(s)].dot(Eigen::Vector2d(1, c.t));
+      // A frame sample: outside the grown region, its ray past the edge.
+      if (!c.usable || c.in_mask || std::fabs(c.t) >= corner_cut ||
+          !(n.dot(Eigen::Vector2d(c.u, c.v) - out.centre) > e))
+        continue;
+      const double rise =
+          c.height - height_line[static_cast<size_t>(s)].dot(Eigen::Vector2d(1, c.t));
       const double o = n.dot(Eigen::Vector2d(c.uo, c.vo) - out.centre);
       if (rise > kOverhangRiseMm && o < e - reach) ++over;
     }
@@ -828,8 +840,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   double band_mm = tol;
   for (int s = 0; s < 4; ++s)
     for (double t : {-half_len[static_cast<size_t>(s)], half_len[static_cast<size_t>(s)]})
-      band_mm = std::max(band_mm, tol + std::fabs(height_line[static_cast<size_t>(s)].dot(
-                                              Eigen::Vector2d(1, t))));
+      band_mm = std::max(
+          band_mm, tol + std::fabs(height_line[static_cast<size_t>(s)].dot(Eigen::Vector2d(1, t))));
   out.mask = cv::Mat::zeros(h, w, CV_8U);
   std::array<Eigen::Vector2d, 4> normals;
   for (int s = 0; s < 4; ++s) normals[static_cast<size_t>(s)] = SideNormal(s, out.angle);
@@ -844,11 +856,10 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         const Eigen::Vector2d dq = plane_of(x, y) - out.centre;
         double inside = std::numeric_limits<double>::max();
         for (int s = 0; s < 4; ++s)
-          inside = std::min(inside, out.edge[static_cast<size_t>(s)] -
-                                        normals[static_cast<size_t>(s)].dot(dq));
+          inside = std::min(
+              inside, out.edge[static_cast<size_t>(s)] - normals[static_cast<size_t>(s)].dot(dq));
         bool in = inside >= 0;
-        if (in && ok[x] && !m[x])
-          in = inside > spacing && std::fabs(frame.H(xyz(x, y))) <= band_mm;
+        if (in && ok[x] && !m[x]) in = inside > spacing && std::fabs(frame.H(xyz(x, y))) <= band_mm;
         o[x] = in ? 255 : 0;
         local += ok[x] && (in != (m[x] != 0));
       }
@@ -1236,8 +1247,8 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   }
 
   // ---- 5b. Outline: the visible canvas as a rectangle in the plane (axes, mask, hidden edges).
-  const Outline outline =
-      FitOutline(xyz, final_mask, valid, fit_mask, frame, noise_sigma, std::min(spacing_x, spacing_y));
+  const Outline outline = FitOutline(xyz, final_mask, valid, fit_mask, frame, noise_sigma,
+                                     std::min(spacing_x, spacing_y));
   if (outline.ok) final_mask = outline.mask;
 
   // ---- 6. Canvas frame.
@@ -1329,10 +1340,14 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       const Eigen::Vector2d ns = SideNormal(s, outline.angle);
       const double at = outline.edge[static_cast<size_t>(s)] + ns.dot(outline.centre);
       const char* name = nullptr;
-      if (ns.dot(xu) > 0.5) name = "right", box.x1 = outline.closed[static_cast<size_t>(s)] ? at : box.x1;
-      if (ns.dot(xu) < -0.5) name = "left", box.x0 = outline.closed[static_cast<size_t>(s)] ? -at : box.x0;
-      if (ns.dot(yu) > 0.5) name = "top", box.y1 = outline.closed[static_cast<size_t>(s)] ? at : box.y1;
-      if (ns.dot(yu) < -0.5) name = "bottom", box.y0 = outline.closed[static_cast<size_t>(s)] ? -at : box.y0;
+      if (ns.dot(xu) > 0.5)
+        name = "right", box.x1 = outline.closed[static_cast<size_t>(s)] ? at : box.x1;
+      if (ns.dot(xu) < -0.5)
+        name = "left", box.x0 = outline.closed[static_cast<size_t>(s)] ? -at : box.x0;
+      if (ns.dot(yu) > 0.5)
+        name = "top", box.y1 = outline.closed[static_cast<size_t>(s)] ? at : box.y1;
+      if (ns.dot(yu) < -0.5)
+        name = "bottom", box.y0 = outline.closed[static_cast<size_t>(s)] ? -at : box.y0;
       if (outline.overhang[static_cast<size_t>(s)] && name) hidden.push_back(name);
     }
   }
