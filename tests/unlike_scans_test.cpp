@@ -3,12 +3,15 @@
 // bevelled frame, with dropouts; variants with border holes and with a frame lip. Each is built
 // in memory and measured against the generator's ground truth.
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
-#include <string>
-
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
+#include <string>
 
 #include "digitize/preprocess.h"
 #include "digitize_synth/ground_truth.h"
@@ -170,14 +173,125 @@ TEST(UnlikeScans, FrameLipIsWarnedAbout) {
   // The warning reaches the canvas step's line and report.json.
   bool in_line = false;
   for (const StepReport& step : run.result->steps)
-    in_line = in_line || (step.name == "canvas" && step.line.find("WARNING: the frame overhangs") !=
-                                                       std::string::npos);
+    in_line = in_line || (step.name == "canvas" &&
+                          step.line.find("WARNING: the frame overhangs") != std::string::npos);
   EXPECT_TRUE(in_line);
   const nlohmann::json report =
       nlohmann::json::parse(PreprocessReportJson(*run.result, PreprocessOptions{}, {"scan.exr"}));
   ASSERT_EQ(report.at("warnings").size(), 1u);
   EXPECT_FALSE(report.at("canvas").at("hidden_edges").empty());
   EXPECT_TRUE(report.at("canvas").at("outline_fitted").get<bool>());
+}
+
+TEST(UnlikeScans, CanvasCutByTheScanBorderKeepsThatSideOpen) {
+  Case c = IndependentLike();
+  c.name = "cut by the scan border";
+  c.scan.offset_mm = Vec3d(-40, 20, 0);
+  c.scan.field_margin = -0.15;  // the view ends inside the canvas on both sides
+  const ScanRun run = RunCase(c);
+  ASSERT_TRUE(run.result.ok()) << run.result.error().message;
+  EXPECT_LE(run.accuracy.axis_error_deg, kMaxAxisErrorDeg);
+  EXPECT_GE(run.accuracy.mask_iou, kMinMaskIou);
+  EXPECT_TRUE(run.result->canvas.warnings.empty());
+}
+
+TEST(UnlikeScans, OvalCanvasKeepsTheGrownRegion) {
+  // A canvas the scan sees as an ellipse (samples outside it moved down to the wall): no
+  // rectangle fits, so the grown region and the PCA axes stay, and the report says why.
+  Case c = IndependentLike();
+  c.frame.enabled = false;
+  c.painting.bow_mm = 0;
+  synth::Painting painting = synth::MakePainting(c.painting);
+  const synth::Scene scene(painting, c.frame);
+  synth::SyntheticScan s = synth::SimulateScan(scene, c.scan);
+  Scan& scan = s.exposures[0];
+  const RigidTransform scan_from_canvas = s.canvas_from_scan.Inverse();
+  Grid<uint8_t> oval(scan.xyz_mm.width, scan.xyz_mm.height, 0);
+  for (size_t i = 0; i < scan.xyz_mm.size(); ++i) {
+    if (!s.canvas_mask_scan.data[i]) continue;
+    Vec3f& p = scan.xyz_mm.data[i];
+    if (!IsValid(p)) {
+      oval.data[i] = 1;  // a dropout inside: measured against the painting's own outline below
+      continue;
+    }
+    Vec3d q = s.canvas_from_scan.Apply(p.cast<double>());
+    const double u = 2 * q.x() / painting.width_mm - 1, v = 2 * q.y() / painting.height_mm - 1;
+    if (u * u + v * v <= 1) {
+      oval.data[i] = 1;
+      continue;
+    }
+    q.z() = -c.frame.wall_depth_mm;
+    p = scan_from_canvas.Apply(q).cast<float>();
+  }
+  SanitizeScan(scan, SanitizeOptions{});
+  const Result<CanvasResult> r = ExtractCanvas(scan, CanvasOptions{});
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_FALSE(r->outline_fitted);
+  EXPECT_NE(r->outline_note.find("not a rectangle"), std::string::npos) << r->outline_note;
+  size_t inter = 0, uni = 0;
+  for (size_t i = 0; i < oval.size(); ++i) {
+    const bool e = r->mask_scan.data[i] != 0, t = oval.data[i] != 0;
+    inter += e && t, uni += e || t;
+  }
+  std::printf("oval: IoU %.5f, outline note: %s\n", double(inter) / double(uni),
+              r->outline_note.c_str());
+  EXPECT_GE(static_cast<double>(inter) / static_cast<double>(uni), 0.99);
+}
+
+// The command line: synth's flags for these cases, and the warning in preprocess's output.
+std::string RunCli(const std::string& args, int* rc) {
+  const std::string command = std::string(DIGITIZE_CLI) + " " + args + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  std::string out;
+  char buffer[4096];
+  while (pipe && fgets(buffer, sizeof(buffer), pipe)) out += buffer;
+  *rc = pipe ? WEXITSTATUS(pclose(pipe)) : -1;
+  return out;
+}
+
+TEST(UnlikeScansCli, SynthFlagsAndThePreprocessWarning) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("unlike_scans_cli_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string scene =
+      " --width-mm 300 --height-mm 220 --model pinhole --scan-size 700 560 --distance-mm 700"
+      " --tilt-deg 6 --tilt-axis-deg 45 --roll-deg 5 --offset-mm 20 -10"
+      " --frame-sides-mm 30 40 35 45 --bevel-mm 2 2 --bow-mm -0.3 --border-holes 10";
+  for (const bool lip : {false, true}) {
+    const std::string name = lip ? "lip" : "plain";
+    int rc = 0;
+    std::string out = RunCli(
+        "synth --out " + (dir / ("s_" + name)).string() + scene + (lip ? " --lip-mm 5" : ""), &rc);
+    ASSERT_EQ(rc, 0) << out;
+    const nlohmann::json truth =
+        nlohmann::json::parse(std::ifstream(dir / ("s_" + name) / "truth.json"), nullptr, false);
+    ASSERT_FALSE(truth.is_discarded());
+    EXPECT_DOUBLE_EQ(truth.at("frame_options").at("side_widths_mm").at("bottom").get<double>(), 45);
+    EXPECT_DOUBLE_EQ(truth.at("frame_options").at("lip_mm").get<double>(), lip ? 5 : 0);
+    out = RunCli("preprocess " + (dir / ("s_" + name) / "scan.exr").string() + " --out " +
+                     (dir / ("c_" + name)).string(),
+                 &rc);
+    ASSERT_EQ(rc, 0) << out;
+    EXPECT_NE(out.find("axes and mask from the canvas outline"), std::string::npos) << out;
+    EXPECT_EQ(out.find("WARNING: the frame overhangs") != std::string::npos, lip) << out;
+    const nlohmann::json report =
+        nlohmann::json::parse(std::ifstream(dir / ("c_" + name) / "report.json"), nullptr, false);
+    ASSERT_FALSE(report.is_discarded());
+    EXPECT_EQ(report.at("warnings").size(), lip ? 1u : 0u);
+  }
+  // A bad shape is refused, naming the option, before anything is written.
+  int rc = 0;
+  const std::string out = RunCli("synth --out " + (dir / "bad").string() + " --bevel-mm 50 2", &rc);
+  EXPECT_EQ(rc, 1) << out;
+  EXPECT_NE(out.find("bevel_width_mm"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
+  const std::string lip_out =
+      RunCli("synth --out " + (dir / "bad").string() + " --width-mm 300 --lip-mm 200", &rc);
+  EXPECT_EQ(rc, 1) << lip_out;
+  EXPECT_NE(lip_out.find("lip_mm 200 hides the whole"), std::string::npos) << lip_out;
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad"));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -78,6 +78,14 @@ Status FrameOptions::Validate() const {
   return Status::Ok();
 }
 
+Status FrameOptions::ValidateFor(double canvas_width_mm, double canvas_height_mm) const {
+  if (Status s = Validate(); !s.ok()) return s;
+  if (enabled && !(2 * lip_mm < std::min(canvas_width_mm, canvas_height_mm)))
+    return Status(Error{"frame options: lip_mm " + Num(lip_mm) + " hides the whole " +
+                        Num(canvas_width_mm) + " x " + Num(canvas_height_mm) + " mm canvas"});
+  return Status::Ok();
+}
+
 double FrameOptions::Width(int side) const {
   const double sides[4] = {left_mm, right_mm, bottom_mm, top_mm};
   return side >= 0 && side < 4 && sides[side] > 0 ? sides[side] : width_mm;
@@ -268,12 +276,9 @@ struct Scene::Impl {
 
 Scene::Scene(const Painting& painting, const FrameOptions& frame)
     : painting_(painting), frame_(frame), impl_(std::make_unique<Impl>()) {
-  Status valid = frame.Validate();
+  Status valid = frame.ValidateFor(painting.width_mm, painting.height_mm);
   DIGITIZE_CHECK(valid.ok(), "Scene: " + valid.message());
   DIGITIZE_CHECK(!painting.truth.height_mm.empty(), "Scene: empty painting");
-  DIGITIZE_CHECK(
-      !frame.enabled || 2 * frame.lip_mm < std::min(painting.width_mm, painting.height_mm),
-      "Scene: frame lip_mm " + Num(frame.lip_mm) + " hides the whole canvas");
   impl_->device = rtcNewDevice(nullptr);
   DIGITIZE_CHECK(impl_->device != nullptr, "Scene: rtcNewDevice failed");
   rtcSetDeviceErrorFunction(impl_->device, ErrorCallback, &impl_->last_error);

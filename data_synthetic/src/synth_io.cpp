@@ -55,16 +55,17 @@ json PaintingOptionsJson(const PaintingOptions& o) {
 }
 
 json FrameOptionsJson(const FrameOptions& o) {
-  return {{"enabled", o.enabled},
-          {"raise_mm", o.raise_mm},
-          {"width_mm", o.width_mm},
-          {"wall_depth_mm", o.wall_depth_mm},
-          {"side_widths_mm",
-           {{"left", o.Width(0)}, {"right", o.Width(1)}, {"bottom", o.Width(2)}, {"top", o.Width(3)}}},
-          {"bevel_width_mm", o.bevel_width_mm},
-          {"bevel_height_mm", o.bevel_height_mm},
-          {"lip_mm", o.lip_mm},
-          {"lip_gap_mm", o.lip_gap_mm}};
+  return {
+      {"enabled", o.enabled},
+      {"raise_mm", o.raise_mm},
+      {"width_mm", o.width_mm},
+      {"wall_depth_mm", o.wall_depth_mm},
+      {"side_widths_mm",
+       {{"left", o.Width(0)}, {"right", o.Width(1)}, {"bottom", o.Width(2)}, {"top", o.Width(3)}}},
+      {"bevel_width_mm", o.bevel_width_mm},
+      {"bevel_height_mm", o.bevel_height_mm},
+      {"lip_mm", o.lip_mm},
+      {"lip_gap_mm", o.lip_gap_mm}};
 }
 
 json ScanOptionsJson(const ScanSimOptions& o) {
@@ -123,11 +124,13 @@ std::string SyntheticTruthJson(const Painting& painting, const SyntheticScan& sc
         {"visible_min_mm", {scan.visible_min_mm.x(), scan.visible_min_mm.y()}},
         {"visible_max_mm", {scan.visible_max_mm.x(), scan.visible_max_mm.y()}},
         {"bare_plane",
-         {{"normal", {painting.bare_plane_normal.x(), painting.bare_plane_normal.y(),
-                      painting.bare_plane_normal.z()}},
+         {{"normal",
+           {painting.bare_plane_normal.x(), painting.bare_plane_normal.y(),
+            painting.bare_plane_normal.z()}},
           {"offset_mm", painting.bare_plane_offset_mm},
-          {"about", "least-squares plane of the bare (bowed) canvas, canvas frame, through "
-                    "(W/2, H/2, offset_mm)"}}}}},
+          {"about",
+           "least-squares plane of the bare (bowed) canvas, canvas frame, through "
+           "(W/2, H/2, offset_mm)"}}}}},
       {"scan",
        {{"width_px", scan_w},
         {"height_px", scan_h},

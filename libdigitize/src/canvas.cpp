@@ -516,7 +516,6 @@ constexpr double kOutlineMinSpanShare = 0.3;   // ... spanning this share of its
 constexpr double kOutlineMaxSideDisagreeDeg = 0.5;  // sides' angles agree within this, else no
                                                     // rectangle
 constexpr double kOutlineMaxDisagreement = 0.05;    // rectangle vs mask (valid pixels): share
-constexpr double kOutlineOpenShare = 0.1;  // mask pixels on the scan border: the side is open
 // Overhang: frame samples (higher than the canvas by kOverhangRiseMm) lying over the visible
 // canvas by more than max(kOverhangMm, kOverhangSpacings spacings), along kOverhangShare of a
 // side, mean the frame hides the canvas's edge there (a lip).
@@ -678,9 +677,7 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         std::max(kOutlineCornerMm, kOutlineCornerShare * 2 * half_len[static_cast<size_t>(s)]);
     // Height line by trimmed least squares.
     std::vector<const Cand*> inner;
-    size_t on_border = 0, in_mask = 0;
     for (const Cand& c : cands) {
-      if (c.in_mask) ++in_mask, on_border += c.scan_border;
       if (c.in_mask && c.usable && c.o < e - 0.5 * band && std::fabs(c.t) < corner_cut)
         inner.push_back(&c);
     }
@@ -712,23 +709,29 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       const Cand& c = cands[i];
       like[i] = c.in_mask && c.usable && c.height <= line.dot(Eigen::Vector2d(1, c.t)) + tol;
     }
-    // Bins of one spacing along the side: the outermost canvas-like sample of each.
+    // Bins of one spacing along the side: the outermost canvas-like sample of each, unless it
+    // lies on the scan's border (the canvas goes on beyond the view there).
     const int nbins = std::max(1, static_cast<int>(2 * corner_cut / spacing));
-    std::vector<float> bin_max(static_cast<size_t>(nbins), std::numeric_limits<float>::lowest());
+    std::vector<int> bin_best(static_cast<size_t>(nbins), -1);
     for (size_t i = 0; i < cands.size(); ++i) {
       const Cand& c = cands[i];
       if (!like[i] || std::fabs(c.t) >= corner_cut) continue;
       const int b = std::clamp(static_cast<int>((c.t + corner_cut) / spacing), 0, nbins - 1);
-      bin_max[static_cast<size_t>(b)] = std::max(bin_max[static_cast<size_t>(b)], c.o);
+      int& best = bin_best[static_cast<size_t>(b)];
+      if (best < 0 || c.o > cands[static_cast<size_t>(best)].o) best = static_cast<int>(i);
     }
     std::vector<Eigen::Vector2d> pts;  // (t, o)
-    for (int b = 0; b < nbins; ++b)
-      if (bin_max[static_cast<size_t>(b)] > std::numeric_limits<float>::lowest())
-        pts.emplace_back(-corner_cut + (b + 0.5) * spacing, bin_max[static_cast<size_t>(b)]);
+    for (int b = 0; b < nbins; ++b) {
+      const int best = bin_best[static_cast<size_t>(b)];
+      if (best >= 0 && !cands[static_cast<size_t>(best)].scan_border)
+        pts.emplace_back(-corner_cut + (b + 0.5) * spacing, cands[static_cast<size_t>(best)].o);
+    }
+    // Open: too little of the side's edge is in view to place it.
     out.closed[static_cast<size_t>(s)] =
-        !(on_border > kOutlineOpenShare * std::max<double>(nbins, 1)) && in_mask > 0;
-    if (!out.closed[static_cast<size_t>(s)] || static_cast<int>(pts.size()) < kOutlineMinBins)
-      continue;
+        static_cast<int>(pts.size()) >= kOutlineMinBins &&
+        pts.back().x() - pts.front().x() >=
+            kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)];
+    if (!out.closed[static_cast<size_t>(s)]) continue;
     double beta = 0;
     bool fitted = false;
     for (int pass = 0; pass < 4 && pts.size() >= 3; ++pass) {
@@ -859,9 +862,9 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
           inside = std::min(
               inside, out.edge[static_cast<size_t>(s)] - normals[static_cast<size_t>(s)].dot(dq));
         bool in = inside >= 0;
+        local += ok[x] && (in != (m[x] != 0));
         if (in && ok[x] && !m[x]) in = inside > spacing && std::fabs(frame.H(xyz(x, y))) <= band_mm;
         o[x] = in ? 255 : 0;
-        local += ok[x] && (in != (m[x] != 0));
       }
     }
     differ += local;
@@ -1365,14 +1368,16 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   result.outline_note = outline.ok ? "" : outline.note;
   if (!hidden.empty()) {
     std::string sides;
-    for (const std::string& side : hidden) sides += (sides.empty() ? "" : ", ") + side;
+    for (size_t k = 0; k < hidden.size(); ++k)
+      sides += (k == 0 ? "" : k + 1 == hidden.size() ? " and " : ", ") + hidden[k];
     result.hidden_edges = hidden;
-    result.warnings.push_back(
-        "the frame overhangs the canvas (" + sides +
-        " edge): its edge there is hidden, so the canvas is larger than the " +
-        std::to_string(static_cast<int>(std::lround(result.extent_mm.x()))) + " x " +
-        std::to_string(static_cast<int>(std::lround(result.extent_mm.y()))) +
-        " mm visible; unframe it to scan the whole canvas");
+    result.warnings.push_back("the frame overhangs the canvas along its " + sides +
+                              (hidden.size() > 1 ? " edges" : " edge") +
+                              ": the canvas goes on under it, so it is larger than the " +
+                              std::to_string(static_cast<int>(std::lround(result.extent_mm.x()))) +
+                              " x " +
+                              std::to_string(static_cast<int>(std::lround(result.extent_mm.y()))) +
+                              " mm seen (scan it out of the frame for the whole canvas)");
   }
   result.seed_x = sx;
   result.seed_y = sy;

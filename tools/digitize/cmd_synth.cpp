@@ -63,7 +63,8 @@ int RunSynth(SynthArgs args) {
   }
   if (Status s = args.painting.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.scan.Validate(); !s.ok()) return Fail(cmd, s.message());
-  if (Status s = args.frame.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.frame.ValidateFor(args.painting.width_mm, args.painting.height_mm); !s.ok())
+    return Fail(cmd, s.message());
   if (Status s = args.photo.Validate(); args.photos && !s.ok()) return Fail(cmd, s.message());
 
   ProgressBar bar("synth");

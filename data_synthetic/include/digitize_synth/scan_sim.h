@@ -29,6 +29,8 @@ struct FrameOptions {
   double lip_mm = 0, lip_gap_mm = 8;
   double Width(int side) const;  // side: 0 left, 1 right, 2 bottom, 3 top
   Status Validate() const;
+  // Validate() and, for a canvas of this size, a lip that leaves some of it in view.
+  Status ValidateFor(double canvas_width_mm, double canvas_height_mm) const;
 };
 
 // Canvas-frame scene: the painting's grid surface, the frame (boxes around it) and the wall. Kept
