@@ -505,7 +505,7 @@ double MedianSpacing(const Grid<Vec3f>& xyz, const cv::Mat& mask, const LocalFra
 // canvas-like samples (mask, within the noise of the local canvas height) from the rest. The
 // mask is then every pixel the rectangle holds, so dropouts at the border do not notch it and
 // samples climbing a bevel or a wall's foot above the canvas height are left out.
-constexpr double kOutlineBandMm = 10;         // side band: this far either side of the first guess
+constexpr double kOutlineBandMm = 6;          // side band: this far either side of the first guess
 constexpr double kOutlineBandSpacings = 20;   // ... or this many sample spacings, the larger
 constexpr double kOutlineCornerShare = 0.04;  // side ends left out (corners are rounded by noise)
 constexpr double kOutlineCornerMm = 5;
@@ -594,17 +594,30 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   };
 
   // First guess: minimum-area rectangle of the mask's boundary pixels, placed by the homography.
+  // Rows in parallel, gathered in row order (the same result whatever the schedule).
+  auto gather_rows = [h](auto&& row_fn, auto& per_row) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& r) {
+      for (int y = r.begin(); y < r.end(); ++y) row_fn(y, per_row[static_cast<size_t>(y)]);
+    });
+  };
   std::vector<cv::Point2f> boundary;
-  for (int y = 0; y < h; ++y) {
-    const uint8_t* m = mask.ptr<uint8_t>(y);
-    for (int x = 0; x < w; ++x) {
-      if (!m[x]) continue;
-      const bool edge = x == 0 || y == 0 || x == w - 1 || y == h - 1 || !m[x - 1] || !m[x + 1] ||
-                        !mask.ptr<uint8_t>(y - 1)[x] || !mask.ptr<uint8_t>(y + 1)[x];
-      if (!edge) continue;
-      const Eigen::Vector2d q = plane_of(x, y);
-      boundary.emplace_back(static_cast<float>(q.x()), static_cast<float>(q.y()));
-    }
+  {
+    std::vector<std::vector<cv::Point2f>> per_row(static_cast<size_t>(h));
+    gather_rows(
+        [&](int y, std::vector<cv::Point2f>& row_out) {
+          const uint8_t* m = mask.ptr<uint8_t>(y);
+          for (int x = 0; x < w; ++x) {
+            if (!m[x]) continue;
+            const bool edge = x == 0 || y == 0 || x == w - 1 || y == h - 1 || !m[x - 1] ||
+                              !m[x + 1] || !mask.ptr<uint8_t>(y - 1)[x] ||
+                              !mask.ptr<uint8_t>(y + 1)[x];
+            if (!edge) continue;
+            const Eigen::Vector2d q = plane_of(x, y);
+            row_out.emplace_back(static_cast<float>(q.x()), static_cast<float>(q.y()));
+          }
+        },
+        per_row);
+    for (const auto& row : per_row) boundary.insert(boundary.end(), row.begin(), row.end());
   }
   if (boundary.size() < 8) {
     out.note = "mask too small for an outline";
@@ -632,7 +645,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   std::array<std::vector<Cand>, 4> side_cands;
   const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0),
                                  SideNormal(2, angle0), SideNormal(3, angle0)};
-  for (int y = 0; y < h; ++y) {
+  std::vector<std::array<std::vector<Cand>, 4>> cands_per_row(static_cast<size_t>(h));
+  gather_rows([&](int y, std::array<std::vector<Cand>, 4>& row_out) {
     const uint8_t* m = mask.ptr<uint8_t>(y);
     const uint8_t* ok = valid.ptr<uint8_t>(y);
     for (int x = 0; x < w; ++x) {
@@ -644,9 +658,12 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         if (dist < best_dist) best = s, best_dist = dist;
       }
       if (best < 0) continue;
+      const double o = n0[best].dot(d);
+      // The band's inner half only gives the local canvas height: one sample in four will do.
+      if (o < edge0[static_cast<size_t>(best)] - 0.5 * band && ((x | y) & 1)) continue;
       Cand c{};
       c.side = best;
-      c.o = static_cast<float>(n0[best].dot(d));
+      c.o = static_cast<float>(o);
       c.t = static_cast<float>(n0[best < 2 ? 2 : 0].dot(d));
       c.u = static_cast<float>(q.x()), c.v = static_cast<float>(q.y());
       c.in_mask = m[x] != 0;
@@ -657,9 +674,14 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         c.uo = qo.x(), c.vo = qo.y();
         c.height = frame.H(xyz(x, y));
       }
-      side_cands[static_cast<size_t>(best)].push_back(c);
+      row_out[static_cast<size_t>(best)].push_back(c);
     }
-  }
+  }, cands_per_row);
+  for (const auto& row : cands_per_row)
+    for (int s = 0; s < 4; ++s)
+      side_cands[static_cast<size_t>(s)].insert(side_cands[static_cast<size_t>(s)].end(),
+                                                row[static_cast<size_t>(s)].begin(),
+                                                row[static_cast<size_t>(s)].end());
 
   // Per side: the local canvas height (a line along the side, from the band's inner half),
   // canvas-like samples, open or closed, and the side's angle.
