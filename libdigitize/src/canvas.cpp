@@ -549,6 +549,7 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   const int w = xyz.width, h = xyz.height;
   // Homography pixel -> (u, v), fitted to the (relief-trimmed by reprojection) canvas samples.
   cv::Mat hom;
+  cv::Point2f ref_px;  // a canvas sample's pixel: on the plane's side of the horizon
   {
     const size_t count = static_cast<size_t>(cv::countNonZero(fit_mask));
     const int stride = SampleStride(count, 20000);
@@ -566,6 +567,7 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       out.note = "too few canvas samples for the outline";
       return out;
     }
+    ref_px = px[px.size() / 2];
     for (int pass = 0; pass < 2; ++pass) {
       hom = cv::findHomography(px, uv, 0);
       if (hom.empty() || pass == 1) break;
@@ -587,9 +589,13 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     }
   }
   const cv::Matx33d H(hom);
-  auto plane_of = [&H](int x, int y) {
+  // Pixels whose rays miss the plane (beyond its horizon in the image: the homography's third
+  // coordinate changes sign) have no place on it: NaN, which every test below reads as outside.
+  const double z_sign = H(2, 0) * ref_px.x + H(2, 1) * ref_px.y + H(2, 2) >= 0 ? 1.0 : -1.0;
+  auto plane_of = [&H, z_sign](int x, int y) -> Eigen::Vector2d {
     const double X = H(0, 0) * x + H(0, 1) * y + H(0, 2), Y = H(1, 0) * x + H(1, 1) * y + H(1, 2),
                  Z = H(2, 0) * x + H(2, 1) * y + H(2, 2);
+    if (!(Z * z_sign > 1e-12)) return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
     return Eigen::Vector2d(X / Z, Y / Z);
   };
 
@@ -613,7 +619,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
                               !mask.ptr<uint8_t>(y + 1)[x];
             if (!edge) continue;
             const Eigen::Vector2d q = plane_of(x, y);
-            row_out.emplace_back(static_cast<float>(q.x()), static_cast<float>(q.y()));
+            if (q.allFinite())
+              row_out.emplace_back(static_cast<float>(q.x()), static_cast<float>(q.y()));
           }
         },
         per_row);
@@ -883,7 +890,7 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         for (int s = 0; s < 4; ++s)
           inside = std::min(
               inside, out.edge[static_cast<size_t>(s)] - normals[static_cast<size_t>(s)].dot(dq));
-        bool in = inside >= 0;
+        bool in = inside >= 0 && std::isfinite(dq.x());
         local += ok[x] && (in != (m[x] != 0));
         if (in && ok[x] && !m[x]) in = inside > spacing && std::fabs(frame.H(xyz(x, y))) <= band_mm;
         o[x] = in ? 255 : 0;
