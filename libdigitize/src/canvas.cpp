@@ -526,7 +526,6 @@ constexpr double kOverhangShare = 0.2;
 
 struct Outline {
   bool ok = false;        // rectangle fitted and used for the mask
-  bool angle_ok = false;  // angle from at least one closed side
   double angle = 0;       // rectangle's first axis in the plane's (u, v), radians
   Eigen::Vector2d centre{0, 0};
   std::array<double, 4> edge{};  // outward offsets from the centre: +x', -x', +y', -y'
@@ -809,7 +808,6 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       return out;
     }
   out.angle = angle0 + d;
-  out.angle_ok = true;
 
   // Side positions in the refined frame: the threshold that best separates canvas-like samples
   // (inside) from the others (outside); open sides reach the mask's extent.
@@ -1292,7 +1290,7 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
     scan_x.normalize();
     const double l1 = plane.eigenvalues(0), l2 = plane.eigenvalues(1);
     const Vec3d a = plane.axes.col(0), b = plane.axes.col(1);
-    if (outline.angle_ok) {
+    if (outline.ok) {
       // The canvas edges give the axes; the PCA axes of the relief-trimmed points are pulled by
       // the impasto (about a degree).
       const Vec3d e0 = std::cos(outline.angle) * a + std::sin(outline.angle) * b;
