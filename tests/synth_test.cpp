@@ -333,6 +333,121 @@ TEST(Scene, WithoutFrameTheCanvasEdgeDropsToTheWall) {
   EXPECT_EQ(hits[1].what, Scene::Hit::kCanvas);
 }
 
+// Scans unlike the defaults (issue 10, section 4): per-side widths, bevel, lip, bow.
+
+TEST(FrameOptions, NewShapeOptionsValidateAndNameTheOption) {
+  FrameOptions f;
+  EXPECT_TRUE(f.Validate().ok());
+  f.left_mm = -1;
+  EXPECT_NE(f.Validate().message().find("left_mm"), std::string::npos);
+  f = FrameOptions{};
+  f.top_mm = 20;
+  f.bevel_width_mm = 25;  // wider than the narrowest side
+  EXPECT_NE(f.Validate().message().find("bevel_width_mm"), std::string::npos);
+  f = FrameOptions{};
+  f.bevel_height_mm = f.raise_mm + 1;
+  EXPECT_NE(f.Validate().message().find("bevel_height_mm"), std::string::npos);
+  f = FrameOptions{};
+  f.lip_mm = 5, f.lip_gap_mm = f.raise_mm;
+  EXPECT_NE(f.Validate().message().find("lip_gap_mm"), std::string::npos);
+  EXPECT_DOUBLE_EQ(FrameOptions{}.Width(2), FrameOptions{}.width_mm);
+  PaintingOptions p;
+  p.bow_mm = std::nan("");
+  EXPECT_NE(p.Validate().message().find("bow_mm"), std::string::npos);
+  ScanSimOptions s;
+  s.border_hole_blobs = -1;
+  EXPECT_NE(s.Validate().message().find("border_hole_blobs"), std::string::npos);
+}
+
+TEST(Scene, AsymmetricBevelledFrameAndLipAreWhereAsked) {
+  Painting p = MakePainting(SmallPainting());
+  const double cy = 0.5 * p.height_mm, W = p.width_mm;
+  auto hit_down = [&](const Scene& scene, double x, double y) {
+    std::vector<Scene::RayHit> hits;
+    scene.Intersect({{x, y, 500}}, {{0, 0, -1}}, hits);
+    return hits[0];
+  };
+  FrameOptions frame;
+  frame.left_mm = 35, frame.right_mm = 50, frame.top_mm = 42, frame.bottom_mm = 60;
+  frame.bevel_width_mm = 3, frame.bevel_height_mm = 3;
+  const Scene scene(p, frame);
+  EXPECT_EQ(hit_down(scene, -34, cy).what, Scene::Hit::kFrame);
+  EXPECT_EQ(hit_down(scene, -36, cy).what, Scene::Hit::kWall);
+  EXPECT_EQ(hit_down(scene, W + 49, cy).what, Scene::Hit::kFrame);
+  EXPECT_EQ(hit_down(scene, W + 51, cy).what, Scene::Hit::kWall);
+  EXPECT_EQ(hit_down(scene, 20, -59).what, Scene::Hit::kFrame);
+  EXPECT_EQ(hit_down(scene, 20, p.height_mm + 43).what, Scene::Hit::kWall);
+  // The 45 deg bevel: 1.5 mm out, 1.5 mm up (float geometry at 500 mm: 1e-3).
+  const Scene::RayHit bevel = hit_down(scene, -1.5, cy);
+  EXPECT_EQ(bevel.what, Scene::Hit::kFrame);
+  EXPECT_NEAR(bevel.t, 500 - 1.5, 1e-3);
+  EXPECT_NEAR(bevel.normal.z(), std::sqrt(0.5), 1e-4);
+
+  FrameOptions lip;
+  lip.lip_mm = 6;
+  const Scene lipped(p, lip);
+  const Scene::RayHit over = hit_down(lipped, 3, cy);
+  EXPECT_EQ(over.what, Scene::Hit::kFrame);
+  EXPECT_NEAR(over.t, 500 - lip.raise_mm, 1e-3);
+  EXPECT_EQ(hit_down(lipped, 7, cy).what, Scene::Hit::kCanvas);
+  // Under the lip the canvas goes on: a grazing ray below the underside reaches it.
+  std::vector<Scene::RayHit> hits;
+  lipped.Intersect({{8, cy, lip.lip_gap_mm - 1}}, {{-1, 0, -2}}, hits);  // lands at X = 4.5
+  EXPECT_EQ(hits[0].what, Scene::Hit::kCanvas);
+}
+
+TEST(Painting, BowIsInTheTruthAndItsPlaneIsTheLeastSquaresOne) {
+  PaintingOptions o = SmallPainting();
+  o.weave = o.strokes = o.impasto = o.craquelure = false;
+  o.bow_mm = -0.5;
+  const Painting p = MakePainting(o);
+  const HeightField& t = p.truth;
+  EXPECT_NEAR(t.height_mm(t.width() / 2, t.height() / 2), -0.5, 1e-3);
+  EXPECT_NEAR(t.height_mm(0, 0), 0, 0.02);  // half a texel in from the corner
+  // The mean of (1 - u^2)(1 - v^2) over the square is (2/3)^2; symmetric: no slope.
+  EXPECT_NEAR(p.bare_plane_offset_mm, -0.5 * 4.0 / 9.0, 2e-3);
+  EXPECT_NEAR(p.bare_plane_normal.z(), 1.0, 1e-12);
+  // Normals carry the bow's slope: at a quarter of the width, d/dX = bow (-2u)(2/W)(1 - v^2).
+  const int x = t.width() / 4, y = t.height() / 2;
+  const double X = (x + 0.5) * t.pitch_mm, u = 2 * X / p.width_mm - 1;
+  const double Y = p.height_mm - (y + 0.5) * t.pitch_mm, v = 2 * Y / p.height_mm - 1;
+  const double slope = -0.5 * (-2 * u) * (2 / p.width_mm) * (1 - v * v);
+  EXPECT_NEAR(p.normals(x, y).x(), -slope, 1e-5);
+}
+
+TEST(Scan, BorderHolesLieOnTheCanvasOutline) {
+  Painting p = MakePainting(SmallPainting());
+  const Scene scene(p, FrameOptions{});
+  ScanSimOptions o = CleanScan(SmallScan());
+  o.border_hole_blobs = 12;
+  const SyntheticScan s = SimulateScan(scene, o);
+  const Grid<Vec3f>& xyz = s.exposures[0].xyz_mm;
+  // Distance of every canvas pixel to the outline (pixels with a non-canvas 4-neighbour).
+  const int w = xyz.width, h = xyz.height;
+  size_t lost = 0, far = 0;
+  const double reach = o.hole_blob_radius_px * 1.5 * 1.4 + 1;  // largest blob radius
+  std::vector<std::pair<int, int>> outline;
+  for (int y = 1; y + 1 < h; ++y)
+    for (int x = 1; x + 1 < w; ++x)
+      if (s.canvas_mask_scan(x, y) &&
+          (!s.canvas_mask_scan(x - 1, y) || !s.canvas_mask_scan(x + 1, y) ||
+           !s.canvas_mask_scan(x, y - 1) || !s.canvas_mask_scan(x, y + 1)))
+        outline.emplace_back(x, y);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      if (!s.canvas_mask_scan(x, y) || IsValid(xyz(x, y))) continue;
+      ++lost;
+      double best = 1e9;
+      for (const auto& [ox, oy] : outline) best = std::min(best, std::hypot(x - ox, y - oy));
+      far += best > reach;
+    }
+  EXPECT_GT(lost, 100u);
+  EXPECT_EQ(far, 0u);
+  // The visible canvas's box: the whole canvas less the strip the tilted frame hides.
+  EXPECT_LE(s.visible_max_mm.x() - s.visible_min_mm.x(), p.width_mm);
+  EXPECT_GT(s.visible_max_mm.x() - s.visible_min_mm.x(), p.width_mm - 10);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scan
 

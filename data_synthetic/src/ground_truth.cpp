@@ -68,6 +68,16 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
   acc.normal_error_deg = AngleDeg(est_cfs.rotation.row(2).transpose(),
                                   truth_cfs.rotation.row(2).transpose());
 
+  {
+    const Vec3d x_est = truth_from_est.rotation.col(0);
+    acc.axis_error_deg =
+        std::abs(std::atan2(x_est.y(), x_est.x())) * 180.0 / 3.14159265358979323846;
+    const Eigen::Vector2d visible = scan.visible_max_mm - scan.visible_min_mm;
+    acc.extent_error_mm = (result.canvas.extent_mm - visible).cwiseAbs().maxCoeff();
+    acc.bare_plane_tilt_deg = AngleDeg(est_cfs.rotation.row(2).transpose(),
+                                       truth_cfs.rotation.transpose() * painting.bare_plane_normal);
+  }
+
   // Mask in scan pixels.
   const Grid<uint8_t>& est_mask = result.canvas.mask_scan;
   const Grid<uint8_t>& true_mask = scan.canvas_mask_scan;

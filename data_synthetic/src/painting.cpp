@@ -715,6 +715,8 @@ Status PaintingOptions::Validate() const {
     return fail("crack_width_mm must be in (0, 100], got " + str(crack_width_mm));
   if (region_count < 1 || region_count > 256)
     return fail("region_count must be in [1, 256], got " + std::to_string(region_count));
+  if (!(std::isfinite(bow_mm) && std::abs(bow_mm) <= 100))
+    return fail("bow_mm must be in [-100, 100], got " + str(bow_mm));
   return Status::Ok();
 }
 
@@ -806,6 +808,10 @@ Painting MakePainting(const PaintingOptions& options) {
                 if (model.weave_on) h += model.weave(X, Y, at) * exp(-paint / kWeaveBurialMm);
                 for (size_t k = 0; k < model.cracks.size(); ++k)
                   h += model.cracks[k](X, Y, crack_sites[k], at);
+                if (options.bow_mm != 0) {
+                  const J u = 2.0 * X / p.width_mm - 1.0, v = 2.0 * Y / p.height_mm - 1.0;
+                  h += options.bow_mm * (1.0 - u * u) * (1.0 - v * v);
+                }
                 p.truth.height_mm(x, y) = static_cast<float>(h.a);
                 Vec3d n(-h.v[0], -h.v[1], 1.0);
                 p.normals(x, y) = n.normalized().cast<float>();
@@ -815,6 +821,23 @@ Painting MakePainting(const PaintingOptions& options) {
           }
         }
       });
+  // The bare canvas's plane: least squares of the bow over the texel centres (X', Y' centred, so
+  // the normal equations separate: offset = mean, slopes = sum(X' bow) / sum(X'^2)).
+  if (options.bow_mm != 0) {
+    double s = 0, sx = 0, sy = 0, xx = 0, yy = 0;
+    for (int y = 0; y < h_px; ++y)
+      for (int x = 0; x < w_px; ++x) {
+        const double X = (x + 0.5) * pitch, Y = p.height_mm - (y + 0.5) * pitch;
+        const double u = 2 * X / p.width_mm - 1, v = 2 * Y / p.height_mm - 1;
+        const double b = options.bow_mm * (1 - u * u) * (1 - v * v);
+        const double dx = X - 0.5 * p.width_mm, dy = Y - 0.5 * p.height_mm;
+        s += b, sx += dx * b, sy += dy * b, xx += dx * dx, yy += dy * dy;
+      }
+    const double n = static_cast<double>(w_px) * h_px;
+    p.bare_plane_offset_mm = s / n;
+    p.bare_plane_slope = Eigen::Vector2d(xx > 0 ? sx / xx : 0, yy > 0 ? sy / yy : 0);
+    p.bare_plane_normal = Vec3d(-p.bare_plane_slope.x(), -p.bare_plane_slope.y(), 1).normalized();
+  }
   return p;
 }
 

@@ -1,17 +1,18 @@
 // Simulated structured-light scan of a Scene: one ray per scan pixel (traced once, the pose is
 // shared by every exposure), then per exposure its own noise along the ray, random dropouts,
 // blob-shaped holes and rare outliers. See scan_sim.h for the pose and camera conventions.
+#include "digitize_synth/scan_sim.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
 #include <sstream>
 #include <string>
-
-#include "digitize_synth/scan_sim.h"
 
 namespace digitize::synth {
 namespace {
@@ -80,13 +81,13 @@ RigidTransform ScanFromCanvas(const Painting& painting, const ScanSimOptions& o)
 // Corners of what should be in view (canvas, plus the frame's outer outline at its base and its
 // top when there is one), canvas frame.
 std::vector<Vec3d> Footprint(const Painting& painting, const FrameOptions& frame) {
-  double d = frame.enabled ? frame.width_mm : 0;
+  auto d = [&](int side) { return frame.enabled ? frame.Width(side) : 0.0; };
   std::vector<double> zs = {0.0};
   if (frame.enabled) zs.push_back(frame.raise_mm);
   std::vector<Vec3d> corners;
   for (double z : zs)
-    for (double x : {-d, painting.width_mm + d})
-      for (double y : {-d, painting.height_mm + d}) corners.emplace_back(x, y, z);
+    for (double x : {-d(0), painting.width_mm + d(1)})
+      for (double y : {-d(2), painting.height_mm + d(3)}) corners.emplace_back(x, y, z);
   return corners;
 }
 
@@ -126,14 +127,23 @@ Camera MakeCamera(const Painting& painting, const FrameOptions& frame, const Sca
   return cam;
 }
 
-// Blob-shaped holes of one exposure: irregular discs (two harmonics on the radius).
-Grid<uint8_t> HoleMask(const ScanSimOptions& o, int exposure) {
+// Blob-shaped holes of one exposure: irregular discs (two harmonics on the radius), hole_blobs
+// anywhere and border_hole_blobs centred on pixels of the canvas outline (`outline`, packed
+// y * width + x, raster order).
+Grid<uint8_t> HoleMask(const ScanSimOptions& o, int exposure, const std::vector<int>& outline) {
   Grid<uint8_t> holes(o.width_px, o.height_px, 0);
-  if (o.hole_blobs == 0 || o.hole_blob_radius_px <= 0) return holes;
+  const int border = outline.empty() ? 0 : o.border_hole_blobs;
+  if (o.hole_blobs + border == 0 || o.hole_blob_radius_px <= 0) return holes;
   std::mt19937_64 rng = RowStream(o.seed, exposure, 7, -1);
+  std::mt19937_64 border_rng = RowStream(o.seed, exposure, 8, -1);
   std::uniform_real_distribution<double> unit(0, 1);
-  for (int b = 0; b < o.hole_blobs; ++b) {
+  for (int b = 0; b < o.hole_blobs + border; ++b) {
     double cx = unit(rng) * o.width_px, cy = unit(rng) * o.height_px;
+    if (b >= o.hole_blobs) {
+      const size_t k =
+          std::min(outline.size() - 1, static_cast<size_t>(unit(border_rng) * outline.size()));
+      cx = outline[k] % o.width_px + 0.5, cy = outline[k] / o.width_px + 0.5;
+    }
     double radius = o.hole_blob_radius_px * (0.6 + 0.9 * unit(rng));
     double a2 = 0.25 * unit(rng), a3 = 0.15 * unit(rng);
     double p2 = 2 * kPi * unit(rng), p3 = 2 * kPi * unit(rng);
@@ -181,6 +191,9 @@ Status ScanSimOptions::Validate() const {
   if (!(dropout >= 0 && dropout <= 1)) return fail("dropout must be in [0, 1], got " + Num(dropout));
   if (hole_blobs < 0 || hole_blobs > 100000)
     return fail("hole_blobs must be in [0, 100000], got " + std::to_string(hole_blobs));
+  if (border_hole_blobs < 0 || border_hole_blobs > 100000)
+    return fail("border_hole_blobs must be in [0, 100000], got " +
+                std::to_string(border_hole_blobs));
   if (!(std::isfinite(hole_blob_radius_px) && hole_blob_radius_px >= 0 &&
         hole_blob_radius_px <= 1e5))
     return fail("hole_blob_radius_px must be in [0, 100000], got " + Num(hole_blob_radius_px));
@@ -231,6 +244,30 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
     }
   });
 
+  // Ground truth of the visible canvas: its outline pixels (canvas pixels with a 4-neighbour
+  // that is not canvas, or on the scan's border) and its bounding box in the canvas frame.
+  std::vector<int> outline;
+  {
+    const auto canvas = [&](int i, int j) {
+      return i >= 0 && j >= 0 && i < w && j < h && out.canvas_mask_scan(i, j) != 0;
+    };
+    Eigen::AlignedBox2d box;
+    for (int j = 0; j < h; ++j)
+      for (int i = 0; i < w; ++i) {
+        if (!canvas(i, j)) continue;
+        Vec3d o, d;
+        cam.Ray(i, j, o, d);
+        const Vec3d p = cfs.Apply(o + static_cast<double>(t_mm(i, j)) * d);
+        box.extend(Eigen::Vector2d(p.x(), p.y()));
+        if (!canvas(i - 1, j) || !canvas(i + 1, j) || !canvas(i, j - 1) || !canvas(i, j + 1))
+          outline.push_back(j * w + i);
+      }
+    if (!box.isEmpty()) {
+      out.visible_min_mm = box.min();
+      out.visible_max_mm = box.max();
+    }
+  }
+
   // Exposures: the same hits, each with its own noise and losses.
   out.exposures.resize(static_cast<size_t>(options.exposures));
   for (int e = 0; e < options.exposures; ++e) {
@@ -238,7 +275,7 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
     scan.source = "synthetic exposure " + std::to_string(e) + " (seed " +
                   std::to_string(options.seed) + ")";
     scan.xyz_mm = Grid<Vec3f>(w, h, Vec3f::Constant(kMissing));
-    const Grid<uint8_t> holes = HoleMask(options, e);
+    const Grid<uint8_t> holes = HoleMask(options, e, outline);
     tbb::parallel_for(tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
       for (int j = r.begin(); j < r.end(); ++j) {
         std::mt19937_64 rng = RowStream(options.seed, e, 1, j);
@@ -272,9 +309,10 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
 
 int MatchedResolution(const PaintingOptions& painting, const FrameOptions& frame,
                       const ScanSimOptions& scan) {
-  const double frame_mm = frame.enabled ? 2 * frame.width_mm : 0;
-  const double field_x = (painting.width_mm + frame_mm) * (1 + scan.field_margin);
-  const double field_y = (painting.height_mm + frame_mm) * (1 + scan.field_margin);
+  const double frame_x = frame.enabled ? frame.Width(0) + frame.Width(1) : 0;
+  const double frame_y = frame.enabled ? frame.Width(2) + frame.Width(3) : 0;
+  const double field_x = (painting.width_mm + frame_x) * (1 + scan.field_margin);
+  const double field_y = (painting.height_mm + frame_y) * (1 + scan.field_margin);
   const double pitch = std::max(field_x / std::max(scan.width_px, 1), field_y / std::max(scan.height_px, 1));
   const double long_side = std::max(painting.width_mm, painting.height_mm);
   return std::clamp(static_cast<int>(long_side / (1.1 * pitch)), 64, 8192);

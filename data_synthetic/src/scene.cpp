@@ -10,6 +10,7 @@
 #include <mutex>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "digitize_synth/scan_sim.h"
 
@@ -57,7 +58,37 @@ Status FrameOptions::Validate() const {
     return fail("width_mm must be in (0, 1000], got " + Num(width_mm));
   if (!(std::isfinite(wall_depth_mm) && wall_depth_mm > 0 && wall_depth_mm <= 10000))
     return fail("wall_depth_mm must be in (0, 10000], got " + Num(wall_depth_mm));
+  const char* names[4] = {"left_mm", "right_mm", "bottom_mm", "top_mm"};
+  const double sides[4] = {left_mm, right_mm, bottom_mm, top_mm};
+  for (int k = 0; k < 4; ++k)
+    if (!(std::isfinite(sides[k]) && sides[k] >= 0 && sides[k] <= 1000))
+      return fail(std::string(names[k]) + " must be in [0, 1000] (0 = width_mm), got " +
+                  Num(sides[k]));
+  double narrowest = width_mm;
+  for (int k = 0; k < 4; ++k) narrowest = std::min(narrowest, Width(k));
+  if (!(std::isfinite(bevel_width_mm) && bevel_width_mm >= 0 && bevel_width_mm < narrowest))
+    return fail("bevel_width_mm must be in [0, the narrowest side's width " + Num(narrowest) +
+                "), got " + Num(bevel_width_mm));
+  if (!(std::isfinite(bevel_height_mm) && bevel_height_mm >= 0 && bevel_height_mm <= raise_mm))
+    return fail("bevel_height_mm must be in [0, raise_mm], got " + Num(bevel_height_mm));
+  if (!(std::isfinite(lip_mm) && lip_mm >= 0 && lip_mm <= 1000))
+    return fail("lip_mm must be in [0, 1000], got " + Num(lip_mm));
+  if (lip_mm > 0 && !(std::isfinite(lip_gap_mm) && lip_gap_mm > 0 && lip_gap_mm < raise_mm))
+    return fail("lip_gap_mm must be in (0, raise_mm), got " + Num(lip_gap_mm));
   return Status::Ok();
+}
+
+Status FrameOptions::ValidateFor(double canvas_width_mm, double canvas_height_mm) const {
+  if (Status s = Validate(); !s.ok()) return s;
+  if (enabled && !(2 * lip_mm < std::min(canvas_width_mm, canvas_height_mm)))
+    return Status(Error{"frame options: lip_mm " + Num(lip_mm) + " hides the whole " +
+                        Num(canvas_width_mm) + " x " + Num(canvas_height_mm) + " mm canvas"});
+  return Status::Ok();
+}
+
+double FrameOptions::Width(int side) const {
+  const double sides[4] = {left_mm, right_mm, bottom_mm, top_mm};
+  return side >= 0 && side < 4 && sides[side] > 0 ? sides[side] : width_mm;
 }
 
 struct Scene::Impl {
@@ -147,28 +178,68 @@ struct Scene::Impl {
     Attach(g, Hit::kCanvas);
   }
 
+  // Profile of one side (distance outwards from the canvas outline, height), inner step first.
+  static std::vector<std::array<double, 2>> SideProfile(const FrameOptions& frame, double width) {
+    std::vector<std::array<double, 2>> out;
+    const double bw = frame.bevel_width_mm;
+    if (bw > 0 || frame.bevel_height_mm > 0) {
+      // The bevel's foot is the canvas outline at the canvas plane (below it: the hidden step).
+      out.push_back({0.0, -frame.wall_depth_mm});
+      out.push_back({0.0, 0.0});
+      out.push_back({bw, frame.bevel_height_mm});
+    }
+    for (size_t k = 0; k < kProfile.size(); ++k) {
+      if (!out.empty() && k == 0) continue;
+      const auto& p = kProfile[k];
+      const double d = bw + p[0] * (width - bw);
+      out.push_back({d, p[1] == 0.0 ? -frame.wall_depth_mm : p[1] * frame.raise_mm});
+    }
+    return out;
+  }
+
   // A closed loop of rectangles around the canvas, one per profile point, joined by quads.
   void AddFrame(const Painting& painting, const FrameOptions& frame) {
     const double W = painting.width_mm, H = painting.height_mm;
+    std::array<std::vector<std::array<double, 2>>, 4> side;  // left, right, bottom, top
+    for (int k = 0; k < 4; ++k) side[static_cast<size_t>(k)] = SideProfile(frame, frame.Width(k));
+    const size_t points = side[0].size();
     std::vector<Eigen::Vector3f> vertices;
-    for (const auto& p : kProfile) {
-      double d = p[0] * frame.width_mm;
-      double z = p[1] == 0.0 ? -frame.wall_depth_mm : p[1] * frame.raise_mm;
-      for (const auto& corner : {Eigen::Vector2d(-d, -d), Eigen::Vector2d(W + d, -d),
-                                 Eigen::Vector2d(W + d, H + d), Eigen::Vector2d(-d, H + d)})
-        vertices.emplace_back(static_cast<float>(corner.x()), static_cast<float>(corner.y()),
-                              static_cast<float>(z));
+    for (size_t i = 0; i < points; ++i) {
+      const double dl = side[0][i][0], dr = side[1][i][0], db = side[2][i][0], dt = side[3][i][0];
+      // Every side shares the profile's heights; only the distances differ.
+      const float z = static_cast<float>(side[0][i][1]);
+      for (const auto& corner : {Eigen::Vector2d(-dl, -db), Eigen::Vector2d(W + dr, -db),
+                                 Eigen::Vector2d(W + dr, H + dt), Eigen::Vector2d(-dl, H + dt)})
+        vertices.emplace_back(static_cast<float>(corner.x()), static_cast<float>(corner.y()), z);
     }
     std::vector<std::array<unsigned, 3>> triangles;
-    for (unsigned i = 0; i + 1 < kProfile.size(); ++i) {
-      for (unsigned k = 0; k < 4; ++k) {
-        unsigned k1 = (k + 1) % 4;
-        unsigned a = 4 * i + k, b = 4 * i + k1, c = 4 * (i + 1) + k1, d = 4 * (i + 1) + k;
-        triangles.push_back({a, b, c});
-        triangles.push_back({a, c, d});
-      }
+    for (unsigned i = 0; i + 1 < points; ++i) AddRing(4 * i, 4 * (i + 1), triangles);
+    if (frame.lip_mm > 0) {
+      // The lip: a plate from the lip's inner outline to the moulding's top (past the bevel),
+      // lip_gap_mm .. raise_mm above the canvas plane: top, underside and inner face.
+      const double L = frame.lip_mm, o = frame.bevel_width_mm;
+      const unsigned base = static_cast<unsigned>(vertices.size());
+      for (double z : {frame.lip_gap_mm, frame.raise_mm})
+        for (double d : {-L, o})
+          for (const auto& corner : {Eigen::Vector2d(-d, -d), Eigen::Vector2d(W + d, -d),
+                                     Eigen::Vector2d(W + d, H + d), Eigen::Vector2d(-d, H + d)})
+            vertices.emplace_back(static_cast<float>(corner.x()), static_cast<float>(corner.y()),
+                                  static_cast<float>(z));
+      AddRing(base + 0, base + 4, triangles);   // underside
+      AddRing(base + 8, base + 12, triangles);  // top
+      AddRing(base + 0, base + 8, triangles);   // inner face
     }
     AddTriangles(vertices, triangles, Hit::kFrame);
+  }
+
+  // Quads joining two rectangles of four vertices each (corners in the same order).
+  static void AddRing(unsigned a0, unsigned b0, std::vector<std::array<unsigned, 3>>& triangles) {
+    for (unsigned k = 0; k < 4; ++k) {
+      const unsigned k1 = (k + 1) % 4;
+      const unsigned a = a0 + k, b = a0 + k1, c = b0 + k1, d = b0 + k;
+      triangles.push_back({a, b, c});
+      triangles.push_back({a, c, d});
+    }
   }
 
   // Without a frame: the canvas's sides, from the wall up to the lowest border height (so they
@@ -205,7 +276,7 @@ struct Scene::Impl {
 
 Scene::Scene(const Painting& painting, const FrameOptions& frame)
     : painting_(painting), frame_(frame), impl_(std::make_unique<Impl>()) {
-  Status valid = frame.Validate();
+  Status valid = frame.ValidateFor(painting.width_mm, painting.height_mm);
   DIGITIZE_CHECK(valid.ok(), "Scene: " + valid.message());
   DIGITIZE_CHECK(!painting.truth.height_mm.empty(), "Scene: empty painting");
   impl_->device = rtcNewDevice(nullptr);

@@ -50,14 +50,22 @@ json PaintingOptionsJson(const PaintingOptions& o) {
           {"craquelure", o.craquelure},
           {"crack_depth_mm", o.crack_depth_mm},
           {"crack_width_mm", o.crack_width_mm},
-          {"region_count", o.region_count}};
+          {"region_count", o.region_count},
+          {"bow_mm", o.bow_mm}};
 }
 
 json FrameOptionsJson(const FrameOptions& o) {
-  return {{"enabled", o.enabled},
-          {"raise_mm", o.raise_mm},
-          {"width_mm", o.width_mm},
-          {"wall_depth_mm", o.wall_depth_mm}};
+  return {
+      {"enabled", o.enabled},
+      {"raise_mm", o.raise_mm},
+      {"width_mm", o.width_mm},
+      {"wall_depth_mm", o.wall_depth_mm},
+      {"side_widths_mm",
+       {{"left", o.Width(0)}, {"right", o.Width(1)}, {"bottom", o.Width(2)}, {"top", o.Width(3)}}},
+      {"bevel_width_mm", o.bevel_width_mm},
+      {"bevel_height_mm", o.bevel_height_mm},
+      {"lip_mm", o.lip_mm},
+      {"lip_gap_mm", o.lip_gap_mm}};
 }
 
 json ScanOptionsJson(const ScanSimOptions& o) {
@@ -74,6 +82,7 @@ json ScanOptionsJson(const ScanSimOptions& o) {
           {"dropout", o.dropout},
           {"hole_blobs", o.hole_blobs},
           {"hole_blob_radius_px", o.hole_blob_radius_px},
+          {"border_hole_blobs", o.border_hole_blobs},
           {"outliers", o.outliers},
           {"exposures", o.exposures},
           {"seed", o.seed}};
@@ -111,7 +120,17 @@ std::string SyntheticTruthJson(const Painting& painting, const SyntheticScan& sc
         {"pitch_mm", painting.truth.pitch_mm},
         {"texel_centre", "X = (x + 0.5) * pitch_mm, Y = (height_px - y - 0.5) * pitch_mm"},
         {"min_height_mm", min_h},
-        {"max_height_mm", max_h}}},
+        {"max_height_mm", max_h},
+        {"visible_min_mm", {scan.visible_min_mm.x(), scan.visible_min_mm.y()}},
+        {"visible_max_mm", {scan.visible_max_mm.x(), scan.visible_max_mm.y()}},
+        {"bare_plane",
+         {{"normal",
+           {painting.bare_plane_normal.x(), painting.bare_plane_normal.y(),
+            painting.bare_plane_normal.z()}},
+          {"offset_mm", painting.bare_plane_offset_mm},
+          {"about",
+           "least-squares plane of the bare (bowed) canvas, canvas frame, through "
+           "(W/2, H/2, offset_mm)"}}}}},
       {"scan",
        {{"width_px", scan_w},
         {"height_px", scan_h},

@@ -110,7 +110,14 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
               "noise sigma %.4f mm; region %zu px (+%zu islands, +%zu boundary), seed (%d, %d)",
               c.extent_mm.x(), c.extent_mm.y(), AngleDeg(normal_scan, -Vec3d::UnitZ()),
               c.plane_rms_mm, c.noise_sigma_mm, c.grown_px, c.islands_filled_px, c.refined_px,
-              c.seed_x, c.seed_y));
+              c.seed_x, c.seed_y) +
+           (c.outline_fitted ? "; axes and mask from the canvas outline"
+                             : "; outline not used (" + c.outline_note + "): PCA axes") +
+           [&] {
+             std::string text;
+             for (const std::string& w : c.warnings) text += "; WARNING: " + w;
+             return text;
+           }());
 
   t0 = Clock::now();
   ReportProgress(progress, "resample", 3.0 / kSteps);
@@ -189,7 +196,11 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"refined_px", c.refined_px},
         {"plane_points", c.plane_points},
         {"seed_px", {c.seed_x, c.seed_y}},
+        {"outline_fitted", c.outline_fitted},
+        {"outline_note", c.outline_note},
+        {"hidden_edges", c.hidden_edges},
         {"canvas_from_scan", TransformJson(c.canvas_from_scan)}}},
+      {"warnings", c.warnings},
       {"resample",
        {{"pitch_mm", result.field.pitch_mm},
         {"size_texels", {result.field.width(), result.field.height()}},

@@ -20,6 +20,7 @@ struct SynthArgs {
   synth::ScanSimOptions scan;
   std::string model = "ortho";
   std::vector<int> scan_size;
+  std::vector<double> frame_sides, bevel, offset;
   bool no_frame = false, no_weave = false, no_strokes = false, no_impasto = false, no_cracks = false;
   // Photo set (--photos).
   bool photos = false, measured = false;
@@ -40,6 +41,14 @@ int RunSynth(SynthArgs args) {
     args.scan.width_px = args.scan_size[0];
     args.scan.height_px = args.scan_size[1];
   }
+  if (args.frame_sides.size() == 4) {
+    args.frame.left_mm = args.frame_sides[0], args.frame.right_mm = args.frame_sides[1];
+    args.frame.top_mm = args.frame_sides[2], args.frame.bottom_mm = args.frame_sides[3];
+  }
+  if (args.bevel.size() == 2)
+    args.frame.bevel_width_mm = args.bevel[0], args.frame.bevel_height_mm = args.bevel[1];
+  if (args.offset.size() == 2)
+    args.scan.offset_mm = Vec3d(args.offset[0], args.offset[1], args.scan.offset_mm.z());
   args.scan.seed = args.painting.seed;
   args.photo.seed = args.painting.seed;
   args.photo.encoding = args.photo_encoding == "srgb16" ? synth::PhotoEncoding::kSrgb16
@@ -54,6 +63,8 @@ int RunSynth(SynthArgs args) {
   }
   if (Status s = args.painting.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.scan.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.frame.ValidateFor(args.painting.width_mm, args.painting.height_mm); !s.ok())
+    return Fail(cmd, s.message());
   if (Status s = args.photo.Validate(); args.photos && !s.ok()) return Fail(cmd, s.message());
   const FolderOutput output{cmd, "synth", {}};
   if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
@@ -120,6 +131,17 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()->group("Frame");
   c->add_option("--frame-width-mm", args->frame.width_mm, "Frame width (mm)")
       ->capture_default_str()->group("Frame");
+  c->add_option("--frame-sides-mm", args->frame_sides,
+                "Per-side frame widths LEFT RIGHT TOP BOTTOM (mm; 0 = --frame-width-mm)")
+      ->expected(4)->group("Frame");
+  c->add_option("--bevel-mm", args->bevel, "Bevel at the frame's inner edge: WIDTH HEIGHT (mm)")
+      ->expected(2)->group("Frame");
+  c->add_option("--lip-mm", args->frame.lip_mm, "Frame lip overhanging the canvas edge (mm)")
+      ->capture_default_str()->group("Frame");
+  c->add_option("--lip-gap-mm", args->frame.lip_gap_mm, "Lip's underside above the canvas (mm)")
+      ->capture_default_str()->group("Frame");
+  c->add_option("--bow-mm", p.bow_mm, "Canvas bow at its centre (mm; negative sags away)")
+      ->capture_default_str()->group("Painting");
   auto& s = args->scan;
   c->add_option("--scan-size", args->scan_size, "Scan grid WIDTH HEIGHT (samples)")->expected(2)->group("Scan");
   c->add_option("--model", args->model, "Scanner model")
@@ -137,6 +159,10 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()->group("Scan");
   c->add_option("--dropout", s.dropout, "Share of samples lost at random")->capture_default_str()->group("Scan");
   c->add_option("--hole-blobs", s.hole_blobs, "Blob-shaped holes")->capture_default_str()->group("Scan");
+  c->add_option("--border-holes", s.border_hole_blobs, "Blob-shaped holes on the canvas outline")
+      ->capture_default_str()->group("Scan");
+  c->add_option("--offset-mm", args->offset, "Canvas centre off the optical axis: X Y (mm)")
+      ->expected(2)->group("Scan");
   c->add_option("--outliers", s.outliers, "Share of outlier samples")->capture_default_str()->group("Scan");
   c->add_option("--exposures", s.exposures, "Exposures of the same pose")->capture_default_str()->group("Scan");
   auto& ph = args->photo;

@@ -33,6 +33,10 @@ struct PreprocessAccuracy {
                                      // canvas (off its grid or on kOutside texels); not counted
                                      // as uncovered: the mask IoU reports that loss
   size_t normals_compared = 0;       // texels whose 3x3 neighbourhood has height
+  // Scans unlike the default (issue 10, section 4):
+  double axis_error_deg = 0;       // estimated canvas X axis vs the canvas edges (in-plane)
+  double extent_error_mm = 0;      // max over X, Y of |estimated extent - visible extent|
+  double bare_plane_tilt_deg = 0;  // estimated normal vs the bare canvas's least-squares plane
 };
 
 struct AccuracyOptions {
@@ -43,6 +47,11 @@ struct AccuracyOptions {
 
 // Definitions:
 //   normal_error_deg: angle between the Z axes of the two canvas frames (scan frame).
+//   axis_error_deg: |angle| of the estimated X axis, rotated into the true canvas frame, from the
+//     true X axis (the canvas's bottom and top edges) about the true normal.
+//   extent_error_mm: against scan.visible_max_mm - scan.visible_min_mm.
+//   bare_plane_tilt_deg: angle between the estimated Z axis and painting.bare_plane_normal (both
+//     in the scan frame); equals normal_error_deg on a flat canvas.
 //   mask_iou / frame_pixels_kept: over scan pixels, estimate.canvas.mask_scan vs
 //     scan.canvas_mask_scan; kept = estimated canvas where the ray hit the frame or the wall.
 //   height: every estimated texel with HasHeight() whose mapped point lies on the true canvas;

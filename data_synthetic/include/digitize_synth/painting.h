@@ -32,6 +32,10 @@ struct PaintingOptions {
   bool craquelure = true;
   double crack_depth_mm = 0.08, crack_width_mm = 0.4;
   int region_count = 6;                    // paint regions (0 .. region_count-1)
+  // Bowed canvas: the bare canvas sags (negative) or bulges towards the viewer (positive) by
+  // bow_mm at its centre and stays at 0 on its outline (a canvas held by its stretcher):
+  // bow(X, Y) = bow_mm (1 - u^2) (1 - v^2), u = 2X/W - 1, v = 2Y/H - 1. Part of the truth heights.
+  double bow_mm = 0;
 
   Status Validate() const;
 };
@@ -41,6 +45,12 @@ struct Painting {
   Grid<Vec3f> normals;         // analytic normals of the band-limited surface, canvas frame
   Grid<uint8_t> region;        // paint region id per texel
   double width_mm = 0, height_mm = 0;
+  // Least-squares plane of the bare canvas (the bow without paint) over the canvas, canvas frame:
+  // Z = bare_plane_offset_mm + bare_plane_slope.x() X' + bare_plane_slope.y() Y' with X', Y'
+  // relative to the canvas centre; bare_plane_normal its unit normal (Z up). Flat canvas: Z = 0.
+  Vec3d bare_plane_normal{0, 0, 1};
+  Eigen::Vector2d bare_plane_slope{0, 0};
+  double bare_plane_offset_mm = 0;
   PaintingOptions options;
 };
 

@@ -16,7 +16,21 @@ struct FrameOptions {
   double raise_mm = 25;   // frame top above the canvas plane (15-40 typical), sharp step inwards
   double width_mm = 45;   // frame moulding width (30-60 typical)
   double wall_depth_mm = 20;  // wall plane below the canvas plane (behind the painting)
+  // Asymmetric moulding: per-side widths (canvas frame: left = X 0, right = X W, bottom = Y 0,
+  // top = Y H, i.e. the top of the scan image when upright); 0 = width_mm.
+  double left_mm = 0, right_mm = 0, top_mm = 0, bottom_mm = 0;
+  // Bevel at the sight edge: the moulding starts at the canvas outline at the canvas plane and
+  // rises outwards by bevel_height_mm over bevel_width_mm, then steps up to the profile (which
+  // keeps its outer edge). 0 = the plain vertical step at the outline.
+  double bevel_width_mm = 0, bevel_height_mm = 0;
+  // Lip: the frame's top overhangs the canvas by lip_mm on every side (hiding that strip of the
+  // canvas edge from a scanner looking straight on), as a plate from lip_gap_mm above the
+  // canvas plane up to raise_mm. 0 = no lip.
+  double lip_mm = 0, lip_gap_mm = 8;
+  double Width(int side) const;  // side: 0 left, 1 right, 2 bottom, 3 top
   Status Validate() const;
+  // Validate() and, for a canvas of this size, a lip that leaves some of it in view.
+  Status ValidateFor(double canvas_width_mm, double canvas_height_mm) const;
 };
 
 // Canvas-frame scene: the painting's grid surface, the frame (boxes around it) and the wall. Kept
@@ -26,8 +40,9 @@ struct FrameOptions {
 //   - canvas: an Embree grid through the texel centres (two triangles per quad), extended by a
 //     ring of vertices on the canvas outline [0, W] x [0, H] that repeat the border heights;
 //   - frame (enabled): a moulding swept around the canvas, inner face a vertical step at the
-//     canvas outline from the wall up to raise_mm, top profile peaking at raise_mm, outer face a
-//     vertical drop to the wall at width_mm from the canvas;
+//     canvas outline from the wall up to raise_mm (or a bevel from the canvas plane first), top
+//     profile peaking at raise_mm, outer face a vertical drop to the wall at the side's width
+//     from the canvas; a lip (lip_mm > 0) is a plate over the canvas's outer strip;
 //   - frame disabled: the canvas's own sides (stretcher) drop vertically to the wall; they are
 //     reported as Hit::kFrame (not canvas, not wall);
 //   - wall: the plane Z = -wall_depth_mm, large enough to fill any view.
@@ -84,6 +99,7 @@ struct ScanSimOptions {
   double noise_mm = 0.02;      // Gaussian sigma along the viewing ray
   double dropout = 0.01;       // share of samples lost at random
   int hole_blobs = 4;          // blob-shaped holes
+  int border_hole_blobs = 0;   // blob-shaped holes centred on the visible canvas's outline
   double hole_blob_radius_px = 6;
   double outliers = 1e-4;      // share of samples displaced by +-(2..50) mm
   int exposures = 1;           // same pose, independent noise and dropouts
@@ -96,6 +112,9 @@ struct SyntheticScan {
   RigidTransform canvas_from_scan;  // ground truth
   Grid<uint8_t> canvas_mask_scan;   // 1 where the scan ray hits the canvas (before dropouts)
   Grid<uint8_t> hit_scan;           // Scene::Hit per scan pixel
+  // Bounding box (canvas frame, mm) of the canvas the scanner sees (the noise-free hits): the
+  // canvas [0, W] x [0, H] less what the frame hides.
+  Eigen::Vector2d visible_min_mm{0, 0}, visible_max_mm{0, 0};
   // What produced it (written to truth.json by WriteSyntheticScan).
   ScanSimOptions options;
   FrameOptions frame;

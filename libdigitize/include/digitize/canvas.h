@@ -4,11 +4,14 @@
 // Steps: PCA plane of all valid points -> heights along its normal -> Sobel magnitude -> region
 // growing from the seed (the scan centre) that stops at strong gradients -> enclosed islands
 // (impasto walls, holes) filled -> boundary refined by a height-step test -> eroded copy used
-// for a second, robust plane fit on the canvas points alone (relief trimmed) -> frame.
+// for a second, robust plane fit on the canvas points alone (relief trimmed) -> outline: the
+// visible canvas as a rectangle in the plane (in-plane axes from its edges, mask = the pixels
+// inside it, frame overhangs detected) -> frame.
 #pragma once
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "digitize/core.h"
 #include "digitize/scan.h"
@@ -36,7 +39,8 @@ struct CanvasOptions {
 struct CanvasResult {
   Grid<uint8_t> mask_scan;         // per scan pixel: 1 = canvas (holes inside included), 0 = not
   RigidTransform canvas_from_scan; // scan frame -> canvas frame (height_field.h)
-  Eigen::Vector2d extent_mm{0, 0}; // canvas bounding rectangle in the canvas plane (X, Y)
+  Eigen::Vector2d extent_mm{0, 0}; // visible canvas in its plane (X, Y): the outline rectangle
+                                   // (else the mask points' bounding rectangle)
   double plane_rms_mm = 0;         // RMS distance of the trimmed canvas points to the plane
   double noise_sigma_mm = 0;       // robust estimate of the scan noise on the canvas
   size_t grown_px = 0;             // region after growing
@@ -44,6 +48,12 @@ struct CanvasResult {
   size_t refined_px = 0;           // pixels added by the boundary refinement
   size_t plane_points = 0;         // points used by the final plane fit
   int seed_x = 0, seed_y = 0;      // seed actually used
+  // Outline (step 5b): the visible canvas as a rectangle in the plane gave the in-plane axes,
+  // the extent and the mask (false: the grown region and PCA axes were kept; why in the note).
+  bool outline_fitted = false;
+  std::string outline_note;
+  std::vector<std::string> hidden_edges;  // "left", "right", "top", "bottom": the frame overhangs
+  std::vector<std::string> warnings;      // one line each, for the report and the console
 };
 
 // Errors (naming scan.source): too few valid samples, no valid sample near the seed, or a
