@@ -462,9 +462,8 @@ TEST(BrdfFit, MeasuredPaintIsApproximated) {
   // Ground truth the one-lobe model cannot match: Lafortune et al.'s 3-lobe fits of measured
   // paints and felt (per-channel lobe shapes, retro-reflection). The fit must stay finite, beat
   // a diffuse-only fit, and its relighting error is reported (issue 3 asks for the figure).
-  const std::filesystem::path path =
-      std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" /
-      "data" / "lafortune_measured_fits.txt";
+  const std::filesystem::path path = std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() /
+                                     "shared" / "data" / "lafortune_measured_fits.txt";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "no " << path;
   Result<std::vector<MeasuredLafortune>> fits = ReadMeasuredLafortuneFits(path);
   ASSERT_TRUE(fits.ok()) << fits.error().message;

@@ -238,8 +238,11 @@ TEST_F(CliTest, PackRunInspectVerify) {
   Output verify_help = RunCli("verify --help");
   for (const char* check : {"header", "checksum", "boxes"}) {
     EXPECT_NE(verify_help.text.find(check), std::string::npos) << check << "\n" << verify_help.text;
-    EXPECT_NE(verify.text.find("ok  " + std::string(check == std::string("header") ? "container" : check)),
-              std::string::npos) << check << "\n" << verify.text;
+    EXPECT_NE(verify.text.find("ok  " +
+                               std::string(check == std::string("header") ? "container" : check)),
+              std::string::npos)
+        << check << "\n"
+        << verify.text;
   }
 
   // One go: scan + photos -> pack, with held-out PSNR from the written pack. --work names a
@@ -786,7 +789,8 @@ std::vector<int> ProgressPercents(const std::string& text, const std::string& ti
 // inside the long render stage of `synth --photos` (once 27 % then 87 %, nothing between); and
 // an output folder given with a trailing slash is printed without a doubled one.
 TEST_F(CliTest, ProgressInALogRisesAndPathsHaveSingleSlashes) {
-  Output synth = RunCli("synth --out " + Path("s") + "/ --resolution 128 --scan-size 160 160 "
+  Output synth = RunCli("synth --out " + Path("s") +
+                        "/ --resolution 128 --scan-size 160 160 "
                         "--photos --lights 16 --seed 7");
   ASSERT_EQ(synth.exit_code, 0) << synth.text;
   const std::vector<int> p = ProgressPercents(synth.text, "synth");
@@ -815,7 +819,8 @@ TEST_F(CliTest, ProgressInALogRisesAndPathsHaveSingleSlashes) {
 void WriteDepthPng16(const std::string& path, int w, int h) {
   std::vector<uint16_t> counts(static_cast<size_t>(w) * h);
   for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) counts[static_cast<size_t>(y) * w + x] = uint16_t(1000 + 37 * x + 11 * y);
+    for (int x = 0; x < w; ++x)
+      counts[static_cast<size_t>(y) * w + x] = uint16_t(1000 + 37 * x + 11 * y);
   auto out = OIIO::ImageOutput::create(path);
   ASSERT_TRUE(out);
   ASSERT_TRUE(out->open(path, OIIO::ImageSpec(w, h, 1, OIIO::TypeDesc::UINT16)));
@@ -847,13 +852,15 @@ TEST_F(CliTest, RunTakesTheDepthFlagsOfPreprocess) {
   for (const char* flag : {"--pixel-pitch-mm", "--height-scale-mm", "--height-offset-mm"})
     EXPECT_NE(help.text.find(flag), std::string::npos) << flag;
   // The value reaches the scan reader: an infinite offset is its error, not an unknown option.
-  Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96 --photos "
+  Output synth = RunCli("synth --out " + Path("s") +
+                        " --resolution 96 --scan-size 96 96 --photos "
                         "--lights 8");
   ASSERT_EQ(synth.exit_code, 0) << synth.text;
   WriteDepthPng16(Path("depth.png"), 64, 64);
-  Output out = RunCli("run " + Path("depth.png") + " --photos " + Path("s/photos/calib.json") +
-                      " --pixel-pitch-mm 0.5 --height-scale-mm 0.001 --height-offset-mm inf --out " +
-                      Path("p.pack.exr"));
+  Output out =
+      RunCli("run " + Path("depth.png") + " --photos " + Path("s/photos/calib.json") +
+             " --pixel-pitch-mm 0.5 --height-scale-mm 0.001 --height-offset-mm inf --out " +
+             Path("p.pack.exr"));
   EXPECT_EQ(out.exit_code, 1) << out.text;
   EXPECT_NE(out.text.find("height_offset_mm"), std::string::npos) << out.text;
   EXPECT_FALSE(fs::exists(Path("p.pack.exr")));
@@ -873,7 +880,8 @@ std::string WriteRtiCapture(const fs::path& dir, int n, float per_inch) {
     const std::string name = "img" + std::to_string(i) + ".tif";
     // A Lambertian grey (rho 0.5) under this light, as 8-bit sRGB.
     const double linear = 0.5 * z;
-    const double srgb = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
+    const double srgb =
+        linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
     std::vector<uint8_t> px(w * h * 3, static_cast<uint8_t>(std::lround(255 * srgb)));
     OIIO::ImageSpec spec(w, h, 3, OIIO::TypeDesc::UINT8);
     if (per_inch > 0) {
@@ -916,7 +924,8 @@ TEST_F(CliTest, RtiPitchFromTagsOrSaidToBeAssumed) {
   ASSERT_EQ(fit.exit_code, 0) << fit.text;
   EXPECT_NE(fit.text.find("assumed"), std::string::npos) << fit.text;
 
-  Output given = RunCli("run --photos " + tagged + " --rti-pitch-mm 0.25 --out " + Path("g.pack.exr"));
+  Output given =
+      RunCli("run --photos " + tagged + " --rti-pitch-mm 0.25 --out " + Path("g.pack.exr"));
   ASSERT_EQ(given.exit_code, 0) << given.text;
   EXPECT_NE(given.text.find("RTI pixel pitch: 0.25 mm, given"), std::string::npos) << given.text;
   EXPECT_NEAR(InspectJson(Path("g.pack.exr")).value("pitch_mm", 0.0), 0.25, 1e-6);

@@ -25,7 +25,8 @@ std::string ReadDoc(const std::string& name) {
 TEST(FormatsDocTest, QuantisedPackDefaultsAreTheCodes) {
   const std::string doc = ReadDoc("formats.md");
   // "(height, normals, rho, lobe;\ndefaults H, N, R, L)": the paragraph on the encodings.
-  const std::regex defaults(R"(\(height, normals, rho, lobe;\s+defaults (\d+), (\d+), (\d+), (\d+)\))");
+  const std::regex defaults(
+      R"(\(height, normals, rho, lobe;\s+defaults (\d+), (\d+), (\d+), (\d+)\))");
   std::smatch m;
   ASSERT_TRUE(std::regex_search(doc, m, defaults))
       << "docs/formats.md no longer states the quantised defaults as "

@@ -268,8 +268,8 @@ TEST(Lafortune, ValidateNamesTheField) {
 
 // <repo>/tests/lafortune_test.cpp -> <repo>/../shared/data (the project's shared data folder).
 std::filesystem::path MeasuredFitsPath() {
-  return std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" /
-         "data" / "lafortune_measured_fits.txt";
+  return std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" / "data" /
+         "lafortune_measured_fits.txt";
 }
 
 TEST(MeasuredLafortune, ReadsThePublishedFits) {

@@ -35,8 +35,7 @@ constexpr double kFloatTol = 2e-7;
 
 // <repo>/tests/photo_set_test.cpp -> <repo>/../shared/data/rti_icon
 fs::path RtiIconDir() {
-  return fs::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" / "data" /
-         "rti_icon";
+  return fs::path(DIGITIZE_SOURCE_DIR).parent_path() / "shared" / "data" / "rti_icon";
 }
 
 double SrgbExact(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
@@ -686,9 +685,9 @@ TEST_F(LpTest, PitchFromResolutionTagsElseSaidToBeAssumed) {
     double mm;
     double tol;  // PNG stores whole pixels per metre
   };
-  for (const Case& c : {Case{"t.tif", 300, "in", 25.4 / 300, 1e-9},
-                        Case{"t.jpg", 40, "cm", 10.0 / 40, 1e-9},
-                        Case{"t.png", 600, "in", 25.4 / 600, 1e-4 * 25.4 / 600}}) {
+  for (const Case& c :
+       {Case{"t.tif", 300, "in", 25.4 / 300, 1e-9}, Case{"t.jpg", 40, "cm", 10.0 / 40, 1e-9},
+        Case{"t.png", 600, "in", 25.4 / 600, 1e-4 * 25.4 / 600}}) {
     write_tagged(c.name, c.per_unit, c.unit);
     auto set = ReadLp(std::string("2\n") + c.name + " 0 0 1\ni1.png 0.6 0 0.8\n");
     ASSERT_TRUE(set.ok()) << set.error().message;

@@ -59,7 +59,8 @@ class ViewerCliTest : public ::testing::Test {
   // Everything in the folder but the log: what the viewer wrote.
   size_t Entries() const {
     size_t n = 0;
-    for (const auto& e : fs::recursive_directory_iterator(dir_)) n += e.path().filename() != "viewer.log";
+    for (const auto& e : fs::recursive_directory_iterator(dir_))
+      n += e.path().filename() != "viewer.log";
     return n;
   }
   fs::path dir_;
@@ -118,7 +119,8 @@ TEST_F(ViewerCliTest, CameraPathNamesTheFilesItWritesIntoANewFolder) {
 }
 
 // Headless without --screenshot used to write gallery.png into the current folder, over a file of
-// that name; every usage error exits 1 (CLI11's codes were 105, 109, ...; --technique and --size 2).
+// that name; every usage error exits 1 (CLI11's codes were 105, 109, ...; --technique and --size
+// 2).
 TEST_F(ViewerCliTest, HeadlessNeedsAScreenshotNameAndUsageErrorsExitOne) {
   std::ofstream(Path("gallery.png")) << "the user's own picture";
   const Output out = RunViewer("--synthetic");
@@ -129,9 +131,9 @@ TEST_F(ViewerCliTest, HeadlessNeedsAScreenshotNameAndUsageErrorsExitOne) {
   std::string kept;
   std::getline(in, kept);
   EXPECT_EQ(kept, "the user's own picture");
-  for (const char* args : {"--synthetic --bogus", "--synthetic --technique nope --screenshot s.png",
-                           "--synthetic --size 12 --screenshot s.png",
-                           "--synthetic --window-frames x"}) {
+  for (const char* args :
+       {"--synthetic --bogus", "--synthetic --technique nope --screenshot s.png",
+        "--synthetic --size 12 --screenshot s.png", "--synthetic --window-frames x"}) {
     const Output bad = RunViewer(args);
     EXPECT_EQ(bad.exit_code, 1) << args << "\n" << bad.text;
     EXPECT_FALSE(fs::exists(Path("s.png"))) << args;

@@ -525,8 +525,8 @@ constexpr double kOverhangSpacings = 2.0;
 constexpr double kOverhangShare = 0.2;
 
 struct Outline {
-  bool ok = false;        // rectangle fitted and used for the mask
-  double angle = 0;       // rectangle's first axis in the plane's (u, v), radians
+  bool ok = false;   // rectangle fitted and used for the mask
+  double angle = 0;  // rectangle's first axis in the plane's (u, v), radians
   Eigen::Vector2d centre{0, 0};
   std::array<double, 4> edge{};  // outward offsets from the centre: +x', -x', +y', -y'
   std::array<bool, 4> closed{};
@@ -594,7 +594,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   auto plane_of = [&H, z_sign](int x, int y) -> Eigen::Vector2d {
     const double X = H(0, 0) * x + H(0, 1) * y + H(0, 2), Y = H(1, 0) * x + H(1, 1) * y + H(1, 2),
                  Z = H(2, 0) * x + H(2, 1) * y + H(2, 2);
-    if (!(Z * z_sign > 1e-12)) return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+    if (!(Z * z_sign > 1e-12))
+      return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
     return Eigen::Vector2d(X / Z, Y / Z);
   };
 
@@ -652,37 +653,39 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0),
                                  SideNormal(2, angle0), SideNormal(3, angle0)};
   std::vector<std::array<std::vector<Cand>, 4>> cands_per_row(static_cast<size_t>(h));
-  gather_rows([&](int y, std::array<std::vector<Cand>, 4>& row_out) {
-    const uint8_t* m = mask.ptr<uint8_t>(y);
-    const uint8_t* ok = valid.ptr<uint8_t>(y);
-    for (int x = 0; x < w; ++x) {
-      const Eigen::Vector2d q = plane_of(x, y), d = q - out.centre;
-      int best = -1;
-      double best_dist = band;
-      for (int s = 0; s < 4; ++s) {
-        const double dist = std::fabs(n0[s].dot(d) - edge0[static_cast<size_t>(s)]);
-        if (dist < best_dist) best = s, best_dist = dist;
-      }
-      if (best < 0) continue;
-      const double o = n0[best].dot(d);
-      // The band's inner half only gives the local canvas height: one sample in four will do.
-      if (o < edge0[static_cast<size_t>(best)] - 0.5 * band && ((x | y) & 1)) continue;
-      Cand c{};
-      c.side = best;
-      c.o = static_cast<float>(o);
-      c.t = static_cast<float>(n0[best < 2 ? 2 : 0].dot(d));
-      c.u = static_cast<float>(q.x()), c.v = static_cast<float>(q.y());
-      c.in_mask = m[x] != 0;
-      c.usable = ok[x] != 0;
-      c.scan_border = x == 0 || y == 0 || x == w - 1 || y == h - 1;
-      if (c.usable) {
-        const Eigen::Vector2f qo = frame.UV(xyz(x, y));
-        c.uo = qo.x(), c.vo = qo.y();
-        c.height = frame.H(xyz(x, y));
-      }
-      row_out[static_cast<size_t>(best)].push_back(c);
-    }
-  }, cands_per_row);
+  gather_rows(
+      [&](int y, std::array<std::vector<Cand>, 4>& row_out) {
+        const uint8_t* m = mask.ptr<uint8_t>(y);
+        const uint8_t* ok = valid.ptr<uint8_t>(y);
+        for (int x = 0; x < w; ++x) {
+          const Eigen::Vector2d q = plane_of(x, y), d = q - out.centre;
+          int best = -1;
+          double best_dist = band;
+          for (int s = 0; s < 4; ++s) {
+            const double dist = std::fabs(n0[s].dot(d) - edge0[static_cast<size_t>(s)]);
+            if (dist < best_dist) best = s, best_dist = dist;
+          }
+          if (best < 0) continue;
+          const double o = n0[best].dot(d);
+          // The band's inner half only gives the local canvas height: one sample in four will do.
+          if (o < edge0[static_cast<size_t>(best)] - 0.5 * band && ((x | y) & 1)) continue;
+          Cand c{};
+          c.side = best;
+          c.o = static_cast<float>(o);
+          c.t = static_cast<float>(n0[best < 2 ? 2 : 0].dot(d));
+          c.u = static_cast<float>(q.x()), c.v = static_cast<float>(q.y());
+          c.in_mask = m[x] != 0;
+          c.usable = ok[x] != 0;
+          c.scan_border = x == 0 || y == 0 || x == w - 1 || y == h - 1;
+          if (c.usable) {
+            const Eigen::Vector2f qo = frame.UV(xyz(x, y));
+            c.uo = qo.x(), c.vo = qo.y();
+            c.height = frame.H(xyz(x, y));
+          }
+          row_out[static_cast<size_t>(best)].push_back(c);
+        }
+      },
+      cands_per_row);
   for (const auto& row : cands_per_row)
     for (int s = 0; s < 4; ++s)
       side_cands[static_cast<size_t>(s)].insert(side_cands[static_cast<size_t>(s)].end(),

@@ -7,15 +7,13 @@
 #include <sys/statvfs.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-
-#include <algorithm>
-#include <atomic>
-#include <cmath>
 #include <exception>
 #include <fstream>
 #include <mutex>

@@ -7,13 +7,13 @@
 
 #include <algorithm>
 #include <charconv>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <ctime>
 #include <fstream>
-#include <sstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <system_error>
 
 #include "checked_output.h"
@@ -953,8 +953,9 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
                      Num(kMaxPackHeightMm) + " mm, canvas_from_scan a rotation within " +
                      Num(kMaxPackTranslationMm / 1000) + " m");
   // ReadPack refused the file unless its checksum matched; verify's output says it was checked.
-  v.checks.push_back("checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "
-                     "every decoded value");
+  v.checks.push_back(
+      "checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "
+      "every decoded value");
   v.checks.push_back("values: " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");

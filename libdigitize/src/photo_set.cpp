@@ -815,8 +815,9 @@ Status PhotoSetOptions::Validate() const {
   if (max_pixels_per_image == 0) return Error{"max_pixels_per_image must be > 0"};
   if (!(rti_pixel_pitch_mm == 0 ||
         (rti_pixel_pitch_mm >= kMinRtiPitchMm && rti_pixel_pitch_mm <= kMaxRtiPitchMm))) {
-    return Error{"rti_pixel_pitch_mm must be " + Num(kMinRtiPitchMm) + " to " + Num(kMaxRtiPitchMm) +
-                 " mm (or 0: from the images), got " + Num(rti_pixel_pitch_mm)};
+    return Error{"rti_pixel_pitch_mm must be " + Num(kMinRtiPitchMm) + " to " +
+                 Num(kMaxRtiPitchMm) + " mm (or 0: from the images), got " +
+                 Num(rti_pixel_pitch_mm)};
   }
   if (!(std::isfinite(rti_camera_distance_mm) && rti_camera_distance_mm > 0)) {
     return Error{"rti_camera_distance_mm must be > 0 mm, got " + Num(rti_camera_distance_mm)};
@@ -1053,9 +1054,8 @@ Result<PhotoSet> ReadRtiCapture(const fs::path& lp_path, const PhotoSetOptions& 
                                 ? "the images' " + tag.substr(tag.find("resolution tag")) +
                                       (IsPlaceholderResolution(tagged_mm_per_pixel)
                                            ? " is a software default, not the canvas's scale"
-                                           : " is not a plausible scale (" +
-                                                 Num(kMinRtiPitchMm) + " to " +
-                                                 Num(kMaxRtiPitchMm) + " mm per pixel)")
+                                           : " is not a plausible scale (" + Num(kMinRtiPitchMm) +
+                                                 " to " + Num(kMaxRtiPitchMm) + " mm per pixel)")
                                 : "the images have no resolution tag";
     set.rti_pitch_source = "assumed: " + why + ", so the physical size (" +
                            Num(width * kRtiAssumedPitchMm) + " x " +

@@ -105,19 +105,20 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   result.canvas = std::move(canvas).value();
   const CanvasResult& c = result.canvas;
   const Vec3d normal_scan = c.canvas_from_scan.rotation.row(2).transpose();
-  step("canvas", t0,
-       Format("canvas: %.1f x %.1f mm, plane tilted %.3f deg from the scanner axis, plane RMS %.4f mm, "
-              "noise sigma %.4f mm; region %zu px (+%zu islands, +%zu boundary), seed (%d, %d)",
-              c.extent_mm.x(), c.extent_mm.y(), AngleDeg(normal_scan, -Vec3d::UnitZ()),
-              c.plane_rms_mm, c.noise_sigma_mm, c.grown_px, c.islands_filled_px, c.refined_px,
-              c.seed_x, c.seed_y) +
-           (c.outline_fitted ? "; axes and mask from the canvas outline"
-                             : "; outline not used (" + c.outline_note + "): PCA axes") +
-           [&] {
-             std::string text;
-             for (const std::string& w : c.warnings) text += "; WARNING: " + w;
-             return text;
-           }());
+  step(
+      "canvas", t0,
+      Format(
+          "canvas: %.1f x %.1f mm, plane tilted %.3f deg from the scanner axis, plane RMS %.4f mm, "
+          "noise sigma %.4f mm; region %zu px (+%zu islands, +%zu boundary), seed (%d, %d)",
+          c.extent_mm.x(), c.extent_mm.y(), AngleDeg(normal_scan, -Vec3d::UnitZ()), c.plane_rms_mm,
+          c.noise_sigma_mm, c.grown_px, c.islands_filled_px, c.refined_px, c.seed_x, c.seed_y) +
+          (c.outline_fitted ? "; axes and mask from the canvas outline"
+                            : "; outline not used (" + c.outline_note + "): PCA axes") +
+          [&] {
+            std::string text;
+            for (const std::string& w : c.warnings) text += "; WARNING: " + w;
+            return text;
+          }());
 
   t0 = Clock::now();
   ReportProgress(progress, "resample", 3.0 / kSteps);

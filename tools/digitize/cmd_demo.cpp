@@ -1,5 +1,5 @@
-#include <cstdio>
 #include <algorithm>
+#include <cstdio>
 #include <memory>
 #include <optional>
 
@@ -241,7 +241,8 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
       "against the ground truth");
   c->add_option("-o,--out", args->out,
                 "Output folder: new, empty, or an earlier demo output (replaced only on success)")
-      ->capture_default_str()->transform(FolderPath());
+      ->capture_default_str()
+      ->transform(FolderPath());
   c->add_option("--resolution", args->resolution,
                 "Painting texels along the long side (0 = matched to the scan's sampling)")
       ->capture_default_str();
@@ -261,7 +262,8 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
   c->add_flag("--no-fit", args->no_fit, "Stop after preprocessing")->group("Photos");
   c->add_option("--fit-method", args->fit_method,
                 "fast (variable projection) or ceres (ceres::Solve reference)")
-      ->check(CLI::IsMember({"fast", "ceres"}, CLI::ignore_case))->capture_default_str()
+      ->check(CLI::IsMember({"fast", "ceres"}, CLI::ignore_case))
+      ->capture_default_str()
       ->group("Fit");
   c->callback([args, &exit_code] { exit_code = RunDemo(*args); });
 }

@@ -171,7 +171,8 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()->group("Photos");
   c->add_option("--rti-pitch-mm", args->photo.rti_pixel_pitch_mm,
                 "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
-                "else 1 mm with a warning)")->group("Photos");
+                "else 1 mm with a warning)")
+      ->group("Photos");
   c->add_flag("--allow-outside-paths", args->photo.allow_outside_paths,
               "Read images the calibration / .lp names outside its folder (.., absolute paths, "
               "symbolic links); refused by default: a shared capture must not open other files")

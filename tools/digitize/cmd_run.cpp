@@ -196,9 +196,9 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
       ->required()->check(CLI::ExistingFile);
   c->add_option("-o,--out", args->out, "Pack file to write (replaced only on success)")->required();
   c->add_option(
-      "--work", args->work,
-      "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
-      "subfolders are replaced, each when new, empty or an earlier output of its kind)")
+       "--work", args->work,
+       "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
+       "subfolders are replaced, each when new, empty or an earlier output of its kind)")
       ->transform(FolderPath());
   c->add_option("--held-out", args->fit.held_out,
                 "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
@@ -208,7 +208,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
   c->add_option("--height-scale-mm", args->preprocess.read.height_scale_mm,
                 "mm per count for 16-bit depth images")->group("Input");
   c->add_option("--height-offset-mm", args->preprocess.read.height_offset_mm,
-                "Added to 16-bit depth after scaling (mm)")->group("Input");
+                "Added to 16-bit depth after scaling (mm)")
+      ->group("Input");
   c->add_option("--mask", args->preprocess.mask, "Scan mask image; 0 = missing sample")
       ->check(CLI::ExistingFile)->group("Input");
   c->add_option("--grid", args->preprocess.grid, "WIDTH HEIGHT of a PLY point grid")
@@ -225,7 +226,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
           ->capture_default_str()->group("Fit");
   c->add_option("--rti-pitch-mm", args->fit.photo.rti_pixel_pitch_mm,
                 "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
-                "else 1 mm with a warning)")->group("Photos");
+                "else 1 mm with a warning)")
+      ->group("Photos");
   c->add_flag("--allow-outside-paths", args->fit.photo.allow_outside_paths,
               "Read images the calibration / .lp names outside its folder (.., absolute paths, "
               "symbolic links); refused by default: a shared capture must not open other files")

@@ -133,15 +133,20 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()->group("Frame");
   c->add_option("--frame-sides-mm", args->frame_sides,
                 "Per-side frame widths LEFT RIGHT TOP BOTTOM (mm; 0 = --frame-width-mm)")
-      ->expected(4)->group("Frame");
+      ->expected(4)
+      ->group("Frame");
   c->add_option("--bevel-mm", args->bevel, "Bevel at the frame's inner edge: WIDTH HEIGHT (mm)")
-      ->expected(2)->group("Frame");
+      ->expected(2)
+      ->group("Frame");
   c->add_option("--lip-mm", args->frame.lip_mm, "Frame lip overhanging the canvas edge (mm)")
-      ->capture_default_str()->group("Frame");
+      ->capture_default_str()
+      ->group("Frame");
   c->add_option("--lip-gap-mm", args->frame.lip_gap_mm, "Lip's underside above the canvas (mm)")
-      ->capture_default_str()->group("Frame");
+      ->capture_default_str()
+      ->group("Frame");
   c->add_option("--bow-mm", p.bow_mm, "Canvas bow at its centre (mm; negative sags away)")
-      ->capture_default_str()->group("Painting");
+      ->capture_default_str()
+      ->group("Painting");
   auto& s = args->scan;
   c->add_option("--scan-size", args->scan_size, "Scan grid WIDTH HEIGHT (samples)")->expected(2)->group("Scan");
   c->add_option("--model", args->model, "Scanner model")
@@ -160,9 +165,11 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   c->add_option("--dropout", s.dropout, "Share of samples lost at random")->capture_default_str()->group("Scan");
   c->add_option("--hole-blobs", s.hole_blobs, "Blob-shaped holes")->capture_default_str()->group("Scan");
   c->add_option("--border-holes", s.border_hole_blobs, "Blob-shaped holes on the canvas outline")
-      ->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--offset-mm", args->offset, "Canvas centre off the optical axis: X Y (mm)")
-      ->expected(2)->group("Scan");
+      ->expected(2)
+      ->group("Scan");
   c->add_option("--outliers", s.outliers, "Share of outlier samples")->capture_default_str()->group("Scan");
   c->add_option("--exposures", s.exposures, "Exposures of the same pose")->capture_default_str()->group("Scan");
   auto& ph = args->photo;

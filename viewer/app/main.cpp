@@ -309,8 +309,10 @@ int main(int argc, char** argv) {
     packs.emplace_back("synthetic", synth::MakeTruthPack(synth::MakePainting(po), tpo));
   }
   if (packs.empty()) {  // an empty room would hide that nothing could be read
-    std::fprintf(stderr, "digitize-viewer: none of the %zu pack(s) could be loaded; nothing shown "
-                 "or written\n", paths.size());
+    std::fprintf(stderr,
+                 "digitize-viewer: none of the %zu pack(s) could be loaded; nothing shown "
+                 "or written\n",
+                 paths.size());
     return 1;
   }
 

@@ -68,8 +68,7 @@ std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_
   if (count <= 1) return out_png;
   char suffix[24];  // "_" + up to 20 digits of a size_t + NUL
   std::snprintf(suffix, sizeof(suffix), "_%03zu", index);
-  return out_png.parent_path() /
-         (out_png.stem().string() + suffix + out_png.extension().string());
+  return out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
 }
 
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,

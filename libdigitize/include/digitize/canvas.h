@@ -39,8 +39,8 @@ struct CanvasOptions {
 struct CanvasResult {
   Grid<uint8_t> mask_scan;         // per scan pixel: 1 = canvas (holes inside included), 0 = not
   RigidTransform canvas_from_scan; // scan frame -> canvas frame (height_field.h)
-  Eigen::Vector2d extent_mm{0, 0}; // visible canvas in its plane (X, Y): the outline rectangle
-                                   // (else the mask points' bounding rectangle)
+  Eigen::Vector2d extent_mm{0, 0};  // visible canvas in its plane (X, Y): the outline rectangle
+                                    // (else the mask points' bounding rectangle)
   double plane_rms_mm = 0;         // RMS distance of the trimmed canvas points to the plane
   double noise_sigma_mm = 0;       // robust estimate of the scan noise on the canvas
   size_t grown_px = 0;             // region after growing
