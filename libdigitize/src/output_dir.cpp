@@ -13,10 +13,8 @@
 
 namespace digitize {
 namespace fs = std::filesystem;
-namespace {
 
-// Absolute, symlinks resolved where the path exists, no "." / ".." / trailing separator.
-fs::path Resolved(const fs::path& p) {
+fs::path ResolvePath(const fs::path& p) {
   std::error_code ec;
   fs::path r = fs::weakly_canonical(fs::absolute(p, ec), ec);
   if (ec) r = fs::absolute(p).lexically_normal();
@@ -24,8 +22,7 @@ fs::path Resolved(const fs::path& p) {
   return r;
 }
 
-// `inner` is `outer` or lies below it (component-wise: "/a/bc" is not inside "/a/b").
-bool IsWithin(const fs::path& inner, const fs::path& outer) {
+bool IsWithinFolder(const fs::path& inner, const fs::path& outer) {
   auto i = inner.begin();
   for (auto o = outer.begin(); o != outer.end(); ++o, ++i) {
     if (o->empty()) continue;  // a trailing separator
@@ -33,6 +30,8 @@ bool IsWithin(const fs::path& inner, const fs::path& outer) {
   }
   return true;
 }
+
+namespace {
 
 bool SameFile(const fs::path& a, const fs::path& b) {
   std::error_code ec;
@@ -70,24 +69,24 @@ Status WriteMarker(const fs::path& dir, const FolderOutput& output) {
 
 Status CheckOutputPath(const fs::path& out, const std::vector<fs::path>& inputs) {
   if (out.empty()) return Error{"the output path is empty"};
-  const fs::path target = Resolved(out);
+  const fs::path target = ResolvePath(out);
   const std::string name = out.string();
   for (const fs::path& input : inputs) {
     if (input.empty()) continue;
-    const fs::path in = Resolved(input);
+    const fs::path in = ResolvePath(input);
     if (SameFile(target, in))
       return Error{name + ": is the input " + input.string() +
                    "; refusing to write an output over an input"};
-    if (IsWithin(in, target))
+    if (IsWithinFolder(in, target))
       return Error{name + ": holds the input " + input.string() +
                    "; refusing to write an output over it"};
-    if (IsWithin(target, in))
+    if (IsWithinFolder(target, in))
       return Error{name + ": lies inside the input " + input.string() +
                    "; refusing to write an output into an input"};
   }
   std::error_code ec;
-  const fs::path cwd = Resolved(fs::current_path(ec));
-  if (!ec && IsWithin(cwd, target))
+  const fs::path cwd = ResolvePath(fs::current_path(ec));
+  if (!ec && IsWithinFolder(cwd, target))
     return Error{name + ": is " + (SameFile(cwd, target) ? "" : "above ") +
                  "the current directory; refusing to replace it (name a folder inside it)"};
   return Status::Ok();

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "digitize/image_io.h"
+#include "digitize/output_dir.h"
 
 namespace digitize {
 namespace {
@@ -679,12 +680,9 @@ fs::path ResolveLpImage(const fs::path& dir, std::string name) {
 Status CheckImageInsideFolder(const fs::path& image, const fs::path& dir, const std::string& entry,
                               const std::string& written, const PhotoSetOptions& options) {
   if (options.allow_outside_paths) return Status::Ok();
-  std::error_code ec;
-  const fs::path base =
-      fs::weakly_canonical(fs::absolute(dir.empty() ? fs::path(".") : dir, ec), ec);
-  const fs::path resolved = fs::weakly_canonical(fs::absolute(image, ec), ec);
-  const fs::path rel = resolved.lexically_relative(base);
-  if (!ec && !rel.empty() && *rel.begin() != ".." && rel != ".") return Status::Ok();
+  const fs::path base = ResolvePath(dir.empty() ? fs::path(".") : dir);
+  const fs::path resolved = ResolvePath(image);
+  if (resolved != base && IsWithinFolder(resolved, base)) return Status::Ok();
   return Error{entry + ": image \"" + written + "\" lies outside the capture folder " +
                base.string() + " (it resolves to " + resolved.string() +
                "); refused unless allowed (--allow-outside-paths)"};

@@ -33,6 +33,12 @@ struct FolderOutput {
   std::vector<std::filesystem::path> inputs;  // the run's inputs (files and folders)
 };
 
+// Absolute, symbolic links resolved where the path exists, no "." / ".." / trailing separator.
+std::filesystem::path ResolvePath(const std::filesystem::path& path);
+// `inner` is `outer` or lies below it, component-wise ("/a/bc" is not inside "/a/b"); both as
+// ResolvePath returns them.
+bool IsWithinFolder(const std::filesystem::path& inner, const std::filesystem::path& outer);
+
 // Refuses an output (file or folder) at `out` that is, lies inside or holds any of `inputs`, or
 // is or holds the current directory. Paths are compared after std::filesystem::weakly_canonical
 // (so "museum/./scans/.." and symlinks are seen through). The error names `out` and the input it
