@@ -145,6 +145,20 @@ TEST(FuzzCorpusTest, LongAttributeNameIsRefusedBeforeOpenExr) {
   }
 }
 
+// A fixed-size attribute stated larger than its type (a v2f of 248 bytes): OpenEXR reads 8 and
+// takes the rest for the next attribute, whose "size" then asked for 1.9 GB (the fuzzer's OOM).
+TEST(FuzzCorpusTest, AttributeSizeDesyncIsRefusedBeforeOpenExr) {
+  for (const char* target : {"fuzz_pack", "fuzz_viewer_load"}) {
+    const fs::path file = CorpusDir(target) / "bad_attribute_size_desync_oom.exr";
+    const auto pack = ReadPack(file);
+    ASSERT_FALSE(pack.ok());
+    EXPECT_EQ(pack.error().message,
+              file.string() +
+                  ": part 2 attribute 'screenWindowCenter' is 248 bytes, a v2f is 8; corrupt "
+                  "OpenEXR header");
+  }
+}
+
 // Through the file readers (headers only): the corpus names images that do not exist, so a seed
 // that parses is refused for its first image; either way the error names the file read.
 TEST(FuzzCorpusTest, FileReadersNameTheFile) {

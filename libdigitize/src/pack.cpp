@@ -18,6 +18,7 @@
 
 #include "checked_output.h"
 #include "digitize/image_io.h"
+#include "exr_attribute_size.h"
 
 namespace digitize {
 namespace {
@@ -298,6 +299,11 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
                      (max_name < 255 ? " without long names" : "")};
       }
       if (!read_i32(size) || size < 0 || !need(static_cast<size_t>(size))) return Error{truncated};
+      if (const std::string problem =
+              exr::AttributeSizeProblem(type, bytes.data() + pos, static_cast<size_t>(size));
+          !problem.empty())
+        return Error{name + ": part " + std::to_string(parts.size()) + " attribute '" +
+                     EscapeForTerminal(attr) + "' " + problem + "; corrupt OpenEXR header"};
       if (attr == "dataWindow") {
         if (type != "box2i" || size != 16) return Error{name + ": malformed dataWindow attribute"};
         int32_t box[4] = {0, 0, 0, 0};
