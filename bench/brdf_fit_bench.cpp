@@ -1,4 +1,4 @@
-// Per-texel Lafortune fit benchmark (issue 3, "Speed"): fit time per texel of the ceres::Solve
+// Per-texel Lafortune fit benchmark (docs/benchmarks.md, "BRDF fit core"): fit time per texel of the ceres::Solve
 // reference path against the fast variable-projection path, on the same synthetic texels, with
 // the relighting error of each side by side. Written as CSV (docs/bench_brdf_fit.csv).
 //

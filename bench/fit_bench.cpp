@@ -1,4 +1,4 @@
-// End-to-end benchmark of `digitize fit` (issue 3 "Speed"): a synthetic painting of ~1 megatexel
+// End-to-end benchmark of `digitize fit` (docs/benchmarks.md): a synthetic painting of ~1 megatexel
 // photographed under 64 point lights (8-bit sRGB PNGs written to disk and read back, as a user has
 // them), fitted on its true canvas. Reports, side by side, the time of each part and the
 // relighting error on held-out lights and views (PSNR against the noise-free truth renders):
@@ -20,6 +20,7 @@
 
 #include "digitize/photo_set.h"
 #include "digitize/reflectance_fit.h"
+#include "bench_support.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
 #include "digitize_synth/scan_sim.h"
@@ -27,8 +28,9 @@
 namespace {
 
 using namespace digitize;
-using Clock = std::chrono::steady_clock;
-double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+using bench::Arg;
+using bench::Clock;
+using bench::Since;
 
 struct Row {
   std::string config;
@@ -87,13 +89,6 @@ Crop MakeCrop(const HeightField& f, const Grid<Vec3f>& normals, const RigidTrans
   return c;
 }
 
-std::string Arg(int argc, char** argv, const std::string& name, const std::string& fallback) {
-  const std::string prefix = "--" + name + "=";
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind(prefix, 0) == 0) return std::string(argv[i]).substr(prefix.size());
-  return fallback;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -105,16 +100,11 @@ int main(int argc, char** argv) {
   const std::string csv_name = Arg(argc, argv, "csv-name", "bench_fit.csv");
   const std::string keep = Arg(argc, argv, "keep", "");
 
-  synth::PaintingOptions po;
-  po.resolution_px = long_side;
-  const synth::Painting painting = synth::MakePainting(po);
-  const synth::Scene scene(painting, synth::FrameOptions{});
-  synth::PhotoSimOptions so;
-  so.lights = lights;
-  so.pixels_per_texel = ppt;
-  auto t0 = Clock::now();
-  const synth::SyntheticPhotoSet truth = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
-  const double seconds_render = Since(t0);
+  const bench::Photographed photographed = bench::PhotographPainting(long_side, lights, ppt);
+  const synth::Painting& painting = photographed.painting;
+  const synth::SyntheticPhotoSet& truth = photographed.photos;
+  const synth::PhotoSimOptions& so = photographed.options;
+  const double seconds_render = photographed.seconds_render;
   const size_t texels = painting.truth.height_mm.size();
   std::printf("painting %dx%d = %.2f M texels, %zu photos %dx%d (%s), rendered in %.1f s\n",
               painting.truth.width(), painting.truth.height(), texels / 1e6, truth.fit.photos.size(),
@@ -135,7 +125,7 @@ int main(int argc, char** argv) {
   const Grid<Vec3f>& normals = painting.normals;
 
   // 1. The whole fit, as `digitize fit` runs it.
-  t0 = Clock::now();
+  auto t0 = Clock::now();
   auto set = ReadCalibration(dir / "calib.json");
   if (!set.ok()) {
     std::fprintf(stderr, "%s\n", set.error().message.c_str());

@@ -1,4 +1,4 @@
-// Pack size against relighting error (issue 4): a synthetic painting photographed under 64 point
+// Pack size against relighting error (docs/benchmarks.md, "Texture packs"): a synthetic painting photographed under 64 point
 // lights and fitted on its true canvas, then packed in half mode and in quantised modes of fewer
 // and fewer mantissa bits. For each: the file's bytes per texel (after ZIP), the write and read
 // times, and the held-out relighting PSNR computed from the pack READ BACK (height, normals and
@@ -17,21 +17,16 @@
 #include "digitize/pack.h"
 #include "digitize/reflectance_fit.h"
 #include "digitize/relief.h"
+#include "bench_support.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
 
 namespace {
 
 using namespace digitize;
-using Clock = std::chrono::steady_clock;
-double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-std::string Arg(int argc, char** argv, const std::string& name, const std::string& fallback) {
-  const std::string prefix = "--" + name + "=";
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind(prefix, 0) == 0) return std::string(argv[i]).substr(prefix.size());
-  return fallback;
-}
+using bench::Arg;
+using bench::Clock;
+using bench::Since;
 
 struct Row {
   std::string config, series;
@@ -47,14 +42,10 @@ int main(int argc, char** argv) {
   const double ppt = std::stod(Arg(argc, argv, "pixels-per-texel", "2.07"));
   const std::filesystem::path csv_dir = Arg(argc, argv, "csv-dir", "");
 
-  synth::PaintingOptions po;
-  po.resolution_px = long_side;
-  const synth::Painting painting = synth::MakePainting(po);
-  const synth::Scene scene(painting, synth::FrameOptions{});
-  synth::PhotoSimOptions so;
-  so.lights = lights;
-  so.pixels_per_texel = ppt;
-  const synth::SyntheticPhotoSet truth = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
+  const bench::Photographed photographed = bench::PhotographPainting(long_side, lights, ppt);
+  const synth::Painting& painting = photographed.painting;
+  const synth::SyntheticPhotoSet& truth = photographed.photos;
+  const synth::PhotoSimOptions& so = photographed.options;
   const HeightField& canvas = painting.truth;
   const size_t texels = canvas.height_mm.size();
   ReflectanceFitOptions options;

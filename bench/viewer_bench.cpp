@@ -1,4 +1,4 @@
-// Viewer benchmark (issue 5): the paper's Tables 1 and 2 on this machine (Mesa llvmpipe, a CPU
+// Viewer benchmark: the paper's (seed 001) Tables 1 and 2 on this machine (Mesa llvmpipe, a CPU
 // rasteriser, 2 cores) with the image error of every rendering against the Embree reference.
 //   Table 1: frame time by technique x view (close / framed / far x face / grazing, view.h):
 //            mesh (full resolution and OpenMesh-simplified), relief everywhere, bump (paper's
@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_support.h"
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
 #include "digitize_synth/painting.h"
@@ -37,13 +38,7 @@ namespace {
 using namespace digitize;
 using namespace digitize::viewer;
 
-std::string Arg(int argc, char** argv, const std::string& name, const std::string& fallback) {
-  const std::string prefix = "--" + name + "=";
-  for (int i = 1; i < argc; ++i)
-    if (std::string(argv[i]).rfind(prefix, 0) == 0)
-      return std::string(argv[i]).substr(prefix.size());
-  return fallback;
-}
+using bench::Arg;
 
 struct Timing {
   double median_ms = 0;

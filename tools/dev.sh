@@ -19,7 +19,7 @@ packages=(
   libembree-dev libcgal-dev libopenmesh-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev  # the fuzz targets: clang's libFuzzer + sanitizer runtimes
-  # viewer (issue 5): GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
+  # viewer: GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
   libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
 )
 
