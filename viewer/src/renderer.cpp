@@ -613,8 +613,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                          float(options.bump_search_min_texels));
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_min_steps"), options.bump_min_steps);
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_max_steps"), options.max_linear_steps);
-      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"),
-                         options.bump_binary_steps);
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"), options.bump_binary_steps);
       const Vec3f slab_min(0.0f, 0.0f, float(std::min(p.min_height_mm, p.delta0_mm)) - 1e-3f);
       const Vec3f slab_max(float(p.width_mm), float(p.height_mm), float(p.delta0_mm));
       glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_min"), 1,
