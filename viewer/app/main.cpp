@@ -1,5 +1,5 @@
-// digitize-viewer: opens packs in a virtual gallery (issue 5). A thin program: flags -> options,
-// the library does the work.
+// digitize-viewer: opens packs in a virtual gallery (viewer/README.md). A thin program: flags ->
+// options, the library does the work.
 //
 //   digitize-viewer [PACK.pack.exr ...] [--synthetic] [--technique adaptive]
 //                   [--screenshot shot.png [--camera-path path.json] [--size 1280x720]]

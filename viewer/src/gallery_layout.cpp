@@ -75,12 +75,6 @@ Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryO
   return g;
 }
 
-Result<Pack> LoadPackForViewer(const std::filesystem::path& path) {
-#if DIGITIZE_VIEWER_HAVE_READ_PACK
-  return ReadPack(path);
-#else
-  return Error{path.string() + ": this build has no pack reader (libdigitize/src/pack.cpp)"};
-#endif
-}
+Result<Pack> LoadPackForViewer(const std::filesystem::path& path) { return ReadPack(path); }
 
 }  // namespace digitize::viewer

@@ -10,8 +10,8 @@
 #include <cmath>
 
 #include "digitize_viewer/painting_setup.h"
+#include "embedded_shaders.h"
 #include "height_mesh.h"
-#include "shaders.h"
 
 namespace digitize::viewer {
 namespace {
@@ -72,10 +72,11 @@ std::vector<size_t> ShadingSource(const Pack& pack) {
   return source;
 }
 
-Result<GLuint> Compile(GLenum type, const std::string& source, const char* what) {
+// The log's "S:L(C)" positions name a GLSL source string S, which the program's legend maps to its
+// file in viewer/shaders/ (embed_shaders.cmake numbers them), hence the legend in the message.
+Result<GLuint> Compile(GLenum type, const shaders::Source& source, const char* what) {
   const GLuint s = glCreateShader(type);
-  const char* src = source.c_str();
-  glShaderSource(s, 1, &src, nullptr);
+  glShaderSource(s, 1, &source.text, nullptr);
   glCompileShader(s);
   GLint ok = 0;
   glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
@@ -83,12 +84,13 @@ Result<GLuint> Compile(GLenum type, const std::string& source, const char* what)
     char log[4096] = {0};
     glGetShaderInfoLog(s, sizeof(log), nullptr, log);
     glDeleteShader(s);
-    return Error{std::string("viewer: shader ") + what + " does not compile: " + log};
+    return Error{std::string("viewer: shader ") + what + " does not compile: " + log +
+                 "(GLSL source strings: " + source.files + ")"};
   }
   return s;
 }
 
-Result<GLuint> Link(const std::string& vs, const std::string& fs, const char* what) {
+Result<GLuint> Link(const shaders::Source& vs, const shaders::Source& fs, const char* what) {
   auto v = Compile(GL_VERTEX_SHADER, vs, what);
   if (!v) return v.error();
   auto f = Compile(GL_FRAGMENT_SHADER, fs, what);
@@ -344,14 +346,13 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
                  std::to_string(epoxy_gl_version() % 10)};
   std::unique_ptr<Renderer> r(new Renderer());
   Impl& m = *r->impl_;
-  const std::string common = shaders::kCommon;
-  auto plane = Link(shaders::kPlaneVertex, common + shaders::kPlaneFragment, "bump plane");
+  auto plane = Link(shaders::kPlaneVertex, shaders::kPlaneFragment, "bump plane");
   if (!plane) return plane.error();
   m.plane_program = *plane;
-  auto box = Link(shaders::kBoxVertex, common + shaders::kBoxFragment, "relief box");
+  auto box = Link(shaders::kBoxVertex, shaders::kBoxFragment, "relief box");
   if (!box) return box.error();
   m.box_program = *box;
-  auto mesh = Link(shaders::kMeshVertex, common + shaders::kMeshFragment, "mesh");
+  auto mesh = Link(shaders::kMeshVertex, shaders::kMeshFragment, "mesh");
   if (!mesh) return mesh.error();
   m.mesh_program = *mesh;
   auto scene = Link(shaders::kSceneVertex, shaders::kSceneFragment, "scene");
@@ -612,8 +613,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                          float(options.bump_search_min_texels));
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_min_steps"), options.bump_min_steps);
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_max_steps"), options.max_linear_steps);
-      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"),
-                         options.bump_binary_steps);
+      glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"), options.bump_binary_steps);
       const Vec3f slab_min(0.0f, 0.0f, float(std::min(p.min_height_mm, p.delta0_mm)) - 1e-3f);
       const Vec3f slab_max(float(p.width_mm), float(p.height_mm), float(p.delta0_mm));
       glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_min"), 1,

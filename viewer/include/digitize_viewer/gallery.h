@@ -1,7 +1,7 @@
-// The virtual gallery (issue 5): a room (floor, walls, ceiling), packs hung in frames at their
-// physical size on the back wall, point lights in front of them, a starting camera; scripted
-// camera paths (JSON) for screenshots; loading packs for the viewer with errors reported, never
-// thrown; the headless gallery screenshot `digitize demo` ends with.
+// The virtual gallery: a room (floor, walls, ceiling), packs hung in frames at their physical
+// size on the back wall, point lights in front of them, a starting camera; scripted camera paths
+// (JSON) for screenshots; loading packs for the viewer with errors reported, never thrown; the
+// headless gallery screenshot `digitize demo` ends with.
 //
 // Layer: viewer (libdigitize only). Frames: the gallery's world frame is in mm with Z UP, the
 // floor at Z = 0, the back wall at Y = room depth; a canvas hangs with its X along world +X, its

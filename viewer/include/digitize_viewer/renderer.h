@@ -1,8 +1,8 @@
-// The real-time painting renderer (issue 5; SPEC step 8; paper 001 section 5): the canvas as a
-// plane at the bump level delta0 with bump mapping, the significant relief as the pack's boxes,
-// each relief-mapped (Policarpo et al. 2005: linear search, then binary refinement, along the
-// view ray between the box's entry and exit points), blended per box by the paper's adaptive
-// alpha -- plus the comparison techniques of the paper's Table 1 and a screen-space-error rule.
+// The real-time painting renderer (paper 001 section 5): the canvas as a plane at the bump level
+// delta0 with bump mapping (5.1), the significant relief as the pack's boxes, each relief-mapped
+// (5.2, after Policarpo et al. 2005: linear search, then binary refinement, along the view ray
+// between the box's entry and exit points), blended per box by the paper's adaptive alpha (5.3)
+// -- plus the comparison techniques of the paper's Table 1 and a screen-space-error rule.
 //
 // Layer: viewer (libdigitize only). GL types stay in renderer.cpp; an OpenGL 4.5 core context
 // must be current on the calling thread for every call (HeadlessContext or a GLFW window).

@@ -1,5 +1,5 @@
-// Viewer cameras (issue 5): a look-at pinhole camera for the real-time renderer that converts to
-// the library's Camera, so RenderRelit (the Embree reference) renders exactly the same view.
+// Viewer cameras: a look-at pinhole camera for the real-time renderer that converts to the
+// library's Camera, so RenderRelit (the Embree reference) renders exactly the same view.
 //
 // Layer: viewer (depends on libdigitize only). No GL type here.
 //
