@@ -16,6 +16,7 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
 #include "test_support.h"
 
 namespace {
@@ -30,7 +31,8 @@ struct Output {
 // `digitize ARGS`, run from `cwd` when given.
 Output RunCli(const std::string& args, const fs::path& cwd = {}) {
   static int counter = 0;
-  const fs::path log = digitize::test::ScratchPath("digitize_cli_test", std::to_string(counter++) + ".log");
+  const fs::path log =
+      digitize::test::ScratchPath("digitize_cli_test", std::to_string(counter++) + ".log");
   const std::string cd = cwd.empty() ? "" : "cd '" + cwd.string() + "' && ";
   const std::string command =
       "(" + cd + std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() + " 2>&1";
@@ -607,7 +609,9 @@ TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
     Output out = RunCli(cmd);
     EXPECT_EQ(out.exit_code, 1) << cmd << "\n" << out.text;
     EXPECT_NE(out.text.find("refusing"), std::string::npos) << out.text;
-    EXPECT_EQ(digitize::test::ReadFileBytes(Path("docs/notes/condition_report.txt")), "irreplaceable") << cmd;
+    EXPECT_EQ(digitize::test::ReadFileBytes(Path("docs/notes/condition_report.txt")),
+              "irreplaceable")
+        << cmd;
     EXPECT_EQ(std::distance(fs::directory_iterator(dir_ / "docs"), fs::directory_iterator()), 1)
         << cmd << ": nothing added";
   }
@@ -641,7 +645,8 @@ TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
   ASSERT_EQ(pre.exit_code, 0) << pre.text;
   EXPECT_TRUE(fs::exists(Path("empty/height.exr")));
   EXPECT_TRUE(fs::exists(Path("empty/.digitize-output")));
-  const auto marker = nlohmann::json::parse(digitize::test::ReadFileBytes(Path("empty/.digitize-output")), nullptr, false);
+  const auto marker = nlohmann::json::parse(
+      digitize::test::ReadFileBytes(Path("empty/.digitize-output")), nullptr, false);
   EXPECT_EQ(marker.value("format", ""), "digitize.output");
   EXPECT_EQ(marker.value("command", ""), "preprocess");
   EXPECT_EQ(marker.value("content", ""), "canvas");

@@ -1,12 +1,13 @@
 // Core types every stage relies on: grids, transforms, results, and the all-or-nothing output
 // folder.
+#include "digitize/core.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 #include <random>
 
-#include "digitize/core.h"
 #include "digitize/output_dir.h"
 #include "test_support.h"
 
@@ -68,7 +69,8 @@ class OutputDirTest : public test::ScratchDirTest {
  protected:
   OutputDirTest() : ScratchDirTest("digitize_core_test", true, false) {}
   size_t Entries() const {
-    return static_cast<size_t>(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
+    return static_cast<size_t>(
+        std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
   }
 };
 

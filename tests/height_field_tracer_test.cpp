@@ -90,7 +90,8 @@ Rays RandomUpwardRays(const HeightField& field, size_t count, double min_elevati
 // ---------------------------------------------------------------------------------------------
 
 TEST(HeightFieldTracer, BuildReportsSizeAndMaxHeight) {
-  const HeightField f = test::MakeTexelField(9, 5, 0.25, [](int x, int y) { return 0.1f * x - 0.2f * y; });
+  const HeightField f =
+      test::MakeTexelField(9, 5, 0.25, [](int x, int y) { return 0.1f * x - 0.2f * y; });
   const HeightFieldTracer t = BuildOrDie(f);
   EXPECT_EQ(t.width(), 9);
   EXPECT_EQ(t.height(), 5);
@@ -174,8 +175,8 @@ TEST(HeightFieldTracer, ShadowOfAStepHasTheAnalyticLength) {
   // iff s < H / tan(e). Lengths are chosen as (k + 0.5) texels, so no texel grazes the crest.
   constexpr double kPitch = 0.1;
   constexpr float kWall = 1.0f;
-  const HeightField f =
-      test::MakeTexelField(160, 12, kPitch, [](int x, int) { return x >= 40 && x <= 63 ? kWall : 0.0f; });
+  const HeightField f = test::MakeTexelField(
+      160, 12, kPitch, [](int x, int) { return x >= 40 && x <= 63 ? kWall : 0.0f; });
   const HeightFieldTracer t = BuildOrDie(f);
   for (int k : {0, 3, 10, 40, 90}) {
     const double length_mm = (k + 0.5) * kPitch;
@@ -281,8 +282,8 @@ TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {
 
 TEST(HeightFieldTracer, VerticalRaysHitTexelCentresWithTheRowFlip) {
   // Heights that differ per texel and per row, so a row flip would show.
-  const HeightField f =
-      test::MakeTexelField(23, 17, 0.1, [](int x, int y) { return 0.01f * x + 0.1f * y + 0.002f * x * y; });
+  const HeightField f = test::MakeTexelField(
+      23, 17, 0.1, [](int x, int y) { return 0.01f * x + 0.1f * y + 0.002f * x * y; });
   const HeightFieldTracer t = BuildOrDie(f);
   std::vector<Vec3f> origins, dirs;
   for (int y = 0; y < f.height(); ++y)
@@ -350,8 +351,8 @@ TEST(HeightFieldTracer, ObliqueRaysHitATiltedPlaneWhereTheAlgebraSays) {
 }
 
 TEST(HeightFieldTracer, LongSpansRunInParallelWithTheSameAnswer) {
-  const HeightField f =
-      test::MakeTexelField(100, 100, 0.1, [](int x, int y) { return 0.4f * std::sin(0.3f * x + 0.1f * y); });
+  const HeightField f = test::MakeTexelField(
+      100, 100, 0.1, [](int x, int y) { return 0.4f * std::sin(0.3f * x + 0.1f * y); });
   const HeightFieldTracer t = BuildOrDie(f);
   const Rays rays = RandomUpwardRays(f, 30000, 2.0, 8);
   std::vector<uint8_t> one(rays.size()), two(rays.size()), all(rays.size());

@@ -269,11 +269,12 @@ TEST_F(IoTest, BinaryPlyKeepsNaN) {
 // OpenMesh's ASCII reader turns "nan" and everything after it into zeros; ours must not.
 TEST_F(IoTest, AsciiPlyKeepsNaNAndExtraProperties) {
   const fs::path path = Path("grid.ply");
-  test::WriteFileBytes(path,
-             "ply\r\nformat ascii 1.0\r\ncomment grid 2 2\r\nelement vertex 4\r\n"
-             "property double z\r\nproperty float x\r\nproperty float nx\r\nproperty float y\r\n"
-             "element face 0\r\nproperty list uchar int vertex_indices\r\nend_header\r\n"
-             "5 0 0.1 0\r\nnan 1 0.2 0\r\n+7e0 0 0.3 1\r\n  8\t1 0.4 1  \r\n");
+  test::WriteFileBytes(
+      path,
+      "ply\r\nformat ascii 1.0\r\ncomment grid 2 2\r\nelement vertex 4\r\n"
+      "property double z\r\nproperty float x\r\nproperty float nx\r\nproperty float y\r\n"
+      "element face 0\r\nproperty list uchar int vertex_indices\r\nend_header\r\n"
+      "5 0 0.1 0\r\nnan 1 0.2 0\r\n+7e0 0 0.3 1\r\n  8\t1 0.4 1  \r\n");
   auto scan = ReadScan(path, {});
   ASSERT_TRUE(scan.ok()) << scan.error().message;
   EXPECT_EQ(scan->xyz_mm(0, 0), Vec3f(0, 0, 5));
@@ -297,8 +298,8 @@ TEST_F(IoTest, CorruptAsciiPly) {
   ExpectErrorAbout(ReadScan(cut, {}), cut, "truncated");
   const fs::path no_z = Path("no_z.ply");
   test::WriteFileBytes(no_z,
-             "ply\nformat ascii 1.0\ncomment grid 1 1\nelement vertex 1\n"
-             "property float x\nproperty float y\nend_header\n0 0\n");
+                       "ply\nformat ascii 1.0\ncomment grid 1 1\nelement vertex 1\n"
+                       "property float x\nproperty float y\nend_header\n0 0\n");
   ExpectErrorAbout(ReadScan(no_z, {}), no_z, "no x, y and z");
 }
 
@@ -478,17 +479,18 @@ TEST_F(IoTest, MaskOfWrongSize) {
 
 TEST_F(IoTest, PlyWithWrongVertexCount) {
   const fs::path path = Path("short.ply");
-  test::WriteFileBytes(path,
-             "ply\nformat ascii 1.0\ncomment grid 3 3\nelement vertex 8\nproperty float x\n"
-             "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n"
-             "1 1 0\n2 1 0\n0 2 0\n1 2 0\n");
+  test::WriteFileBytes(
+      path,
+      "ply\nformat ascii 1.0\ncomment grid 3 3\nelement vertex 8\nproperty float x\n"
+      "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n"
+      "1 1 0\n2 1 0\n0 2 0\n1 2 0\n");
   ExpectErrorAbout(ReadScan(path, {}), path, "vertex count");
   // The header promises 9 vertices, the body holds 4: truncated.
   const fs::path cut = Path("cut.ply");
   test::WriteFileBytes(cut,
-             "ply\nformat binary_little_endian 1.0\ncomment grid 3 3\nelement vertex 9\n"
-             "property float x\nproperty float y\nproperty float z\nend_header\n" +
-                 std::string(4 * 12, '\0'));
+                       "ply\nformat binary_little_endian 1.0\ncomment grid 3 3\nelement vertex 9\n"
+                       "property float x\nproperty float y\nproperty float z\nend_header\n" +
+                           std::string(4 * 12, '\0'));
   ASSERT_FALSE(ReadScan(cut, {}).ok());
   const fs::path not_ply = Path("text.ply");
   test::WriteFileBytes(not_ply, "hello\nworld\n");
@@ -509,9 +511,9 @@ TEST_F(IoTest, AbsurdSizesAreRefusedBeforeAllocating) {
   // A PLY header claiming 10^15 vertices must not be believed.
   const fs::path huge = Path("huge.ply");
   test::WriteFileBytes(huge,
-             "ply\nformat binary_little_endian 1.0\ncomment grid 1000000000 1000000\n"
-             "element vertex 1000000000000000\nproperty float x\nproperty float y\n"
-             "property float z\nend_header\n");
+                       "ply\nformat binary_little_endian 1.0\ncomment grid 1000000000 1000000\n"
+                       "element vertex 1000000000000000\nproperty float x\nproperty float y\n"
+                       "property float z\nend_header\n");
   ExpectErrorAbout(ReadScan(huge, {}), huge, "too large");
 }
 

@@ -116,7 +116,8 @@ TEST(Normals, TiltedPlaneGenericWithinFloatRounding) {
 // The row flip: row 0 is the top (largest Y). A surface rising towards the top rows has an
 // upward slope along +Y, so its normal leans to -Y.
 TEST(Normals, RowFlipSign) {
-  const HeightField field = test::MakeMmField(8, 8, 0.125, [](double, double Y) { return 0.5 * Y; });
+  const HeightField field =
+      test::MakeMmField(8, 8, 0.125, [](double, double Y) { return 0.5 * Y; });
   ASSERT_GT(field.height_mm(3, 0), field.height_mm(3, 7));  // row 0 is higher
   const Grid<Vec3f> n = ComputeNormals(field);
   EXPECT_LT(n(3, 3).y(), -0.4f);
@@ -130,7 +131,8 @@ TEST(Normals, RowFlipSign) {
 // left (or no height themselves) get (0, 0, 1).
 TEST(Normals, PlaneWithHolesExactWhereAnyTriangleRemains) {
   const double a = -0.5, b = 0.125;
-  HeightField field = test::MakeMmField(41, 29, 0.25, [&](double X, double Y) { return a * X + b * Y; });
+  HeightField field =
+      test::MakeMmField(41, 29, 0.25, [&](double X, double Y) { return a * X + b * Y; });
   std::mt19937 rng(7);
   std::uniform_int_distribution<int> pick(0, 9);
   for (auto& s : field.state.data) {
@@ -268,7 +270,8 @@ TEST(Normals, HugeHeightsAndTinyPitchStayFinite) {
   ExpectAllUnitUp(ComputeNormals(field));
 
   // A very steep plane still has the right direction.
-  const HeightField steep = test::MakeMmField(16, 16, 1e-6, [](double X, double) { return 1e6 * X; });
+  const HeightField steep =
+      test::MakeMmField(16, 16, 1e-6, [](double X, double) { return 1e6 * X; });
   for (const Vec3f& v : ComputeNormals(steep).data) {
     EXPECT_NEAR(v.x(), -1.0f, 1e-6f);
     EXPECT_GT(v.z(), 0.0f);

@@ -34,7 +34,9 @@ namespace fs = std::filesystem;
     ASSERT_TRUE(status_.ok()) << status_.message();  \
   } while (0)
 
-fs::path TempDir(const std::string& name) { return test::FreshScratchDir("digitize_pack_test_" + name); }
+fs::path TempDir(const std::string& name) {
+  return test::FreshScratchDir("digitize_pack_test_" + name);
+}
 
 std::vector<char> ReadBytes(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

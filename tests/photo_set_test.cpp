@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
 #include "test_support.h"
 
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.

@@ -10,12 +10,11 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <numeric>
 #include <random>
 #include <set>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
 #include "digitize/scan_io.h"

@@ -21,15 +21,16 @@ inline std::string CurrentTestName() {
 
 // <system temp folder>/<prefix>_<pid>[_<suffix>]: the pid keeps parallel runs (ctest -j, the
 // Release and sanitizer suites at once) apart.
-inline std::filesystem::path ScratchPath(const std::string& prefix, const std::string& suffix = "") {
+inline std::filesystem::path ScratchPath(const std::string& prefix,
+                                         const std::string& suffix = "") {
   std::string name = prefix + "_" + std::to_string(::getpid());
   if (!suffix.empty()) name += "_" + suffix;
   return std::filesystem::temp_directory_path() / name;
 }
 
 // ScratchPath(prefix, suffix), emptied: removed, then created again unless `create` is false.
-inline std::filesystem::path FreshScratchDir(const std::string& prefix, const std::string& suffix = "",
-                                             bool create = true) {
+inline std::filesystem::path FreshScratchDir(const std::string& prefix,
+                                             const std::string& suffix = "", bool create = true) {
   const std::filesystem::path dir = ScratchPath(prefix, suffix);
   std::filesystem::remove_all(dir);
   if (create) std::filesystem::create_directories(dir);
@@ -43,7 +44,9 @@ class ScratchDirTest : public ::testing::Test {
  protected:
   explicit ScratchDirTest(std::string prefix, bool create = true, bool per_test = true)
       : prefix_(std::move(prefix)), create_(create), per_test_(per_test) {}
-  void SetUp() override { dir_ = FreshScratchDir(prefix_, per_test_ ? CurrentTestName() : "", create_); }
+  void SetUp() override {
+    dir_ = FreshScratchDir(prefix_, per_test_ ? CurrentTestName() : "", create_);
+  }
   void TearDown() override {
     if (!dir_.empty()) std::filesystem::remove_all(dir_);
   }
