@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "test_support.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -29,8 +31,8 @@ struct Output {
 // `digitize ARGS`, run from `cwd` when given.
 Output RunCli(const std::string& args, const fs::path& cwd = {}) {
   static int counter = 0;
-  const fs::path log = fs::temp_directory_path() / ("digitize_cli_test_" + std::to_string(::getpid()) + "_" +
-                                                    std::to_string(counter++) + ".log");
+  const fs::path log =
+      digitize::test::ScratchPath("digitize_cli_test", std::to_string(counter++) + ".log");
   const std::string cd = cwd.empty() ? "" : "cd '" + cwd.string() + "' && ";
   const std::string command =
       "(" + cd + std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() + " 2>&1";
@@ -45,25 +47,10 @@ Output RunCli(const std::string& args, const fs::path& cwd = {}) {
   return out;
 }
 
-std::string Bytes(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-class CliTest : public ::testing::Test {
+class CliTest : public digitize::test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("digitize_cli_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  CliTest() : ScratchDirTest("digitize_cli") {}
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
-  fs::path dir_;
 };
 
 TEST_F(CliTest, HelpForEveryCommand) {
@@ -324,9 +311,9 @@ TEST_F(CliTest, PackRunInspectVerify) {
                             Path("limited.pack.exr") + " > " + Path("limited.log") + " 2>&1";
     const int status = std::system(cmd.c_str());
     EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 1);
-    const std::string log = Bytes(Path("limited.log"));
+    const std::string log = digitize::test::ReadFileBytes(Path("limited.log"));
     EXPECT_NE(log.find("limited.pack.exr: write failed"), std::string::npos) << log;
-    EXPECT_EQ(Bytes(Path("limited.pack.exr")), "the previous pack");
+    EXPECT_EQ(digitize::test::ReadFileBytes(Path("limited.pack.exr")), "the previous pack");
     for (const auto& e : fs::directory_iterator(dir_))
       EXPECT_EQ(e.path().filename().string().find(".limited.pack.exr.tmp-"), std::string::npos);
 
@@ -337,7 +324,7 @@ TEST_F(CliTest, PackRunInspectVerify) {
       std::ofstream(Path("full/p.pack.exr")) << "the previous pack";
       Output full = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
                            Path("full/p.pack.exr"));
-      const std::string kept = Bytes(Path("full/p.pack.exr"));
+      const std::string kept = digitize::test::ReadFileBytes(Path("full/p.pack.exr"));
       const auto left =
           std::distance(fs::directory_iterator(Path("full")), fs::directory_iterator());
       (void)std::system(("umount " + Path("full")).c_str());
@@ -622,14 +609,16 @@ TEST_F(CliTest, AFolderOfTheUsersFilesSurvivesEveryCommand) {
     Output out = RunCli(cmd);
     EXPECT_EQ(out.exit_code, 1) << cmd << "\n" << out.text;
     EXPECT_NE(out.text.find("refusing"), std::string::npos) << out.text;
-    EXPECT_EQ(Bytes(Path("docs/notes/condition_report.txt")), "irreplaceable") << cmd;
+    EXPECT_EQ(digitize::test::ReadFileBytes(Path("docs/notes/condition_report.txt")),
+              "irreplaceable")
+        << cmd;
     EXPECT_EQ(std::distance(fs::directory_iterator(dir_ / "docs"), fs::directory_iterator()), 1)
         << cmd << ": nothing added";
   }
   Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + docs);
   EXPECT_NE(pre.text.find(docs + ": holds 'notes/'"), std::string::npos)
       << "names the folder and one thing in it: " << pre.text;
-  EXPECT_EQ(Bytes(Path("work/canvas/mine.txt")), "mine");
+  EXPECT_EQ(digitize::test::ReadFileBytes(Path("work/canvas/mine.txt")), "mine");
   EXPECT_FALSE(fs::exists(Path("work/fit")));
   EXPECT_FALSE(fs::exists(Path("r.pack.exr")));
 
@@ -656,7 +645,8 @@ TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
   ASSERT_EQ(pre.exit_code, 0) << pre.text;
   EXPECT_TRUE(fs::exists(Path("empty/height.exr")));
   EXPECT_TRUE(fs::exists(Path("empty/.digitize-output")));
-  const auto marker = nlohmann::json::parse(Bytes(Path("empty/.digitize-output")), nullptr, false);
+  const auto marker = nlohmann::json::parse(
+      digitize::test::ReadFileBytes(Path("empty/.digitize-output")), nullptr, false);
   EXPECT_EQ(marker.value("format", ""), "digitize.output");
   EXPECT_EQ(marker.value("command", ""), "preprocess");
   EXPECT_EQ(marker.value("content", ""), "canvas");
@@ -667,7 +657,7 @@ TEST_F(CliTest, EarlierOutputsAndEmptyFoldersAreReplaced) {
   Output mine = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("empty"));
   EXPECT_EQ(mine.exit_code, 1);
   EXPECT_NE(mine.text.find("my_notes.txt"), std::string::npos) << mine.text;
-  EXPECT_EQ(Bytes(Path("empty/my_notes.txt")), "mine");
+  EXPECT_EQ(digitize::test::ReadFileBytes(Path("empty/my_notes.txt")), "mine");
 }
 
 // No output onto, into or above an input, the current directory or its parents.
@@ -680,14 +670,14 @@ TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
   fs::create_directories(Path("museum/scans"));
   fs::copy_file(Path("s/scan.exr"), Path("museum/scans/scan.exr"));
   std::ofstream(Path("museum/notes.txt")) << "irreplaceable";
-  const std::string scan_bytes = Bytes(Path("museum/scans/scan.exr"));
+  const std::string scan_bytes = digitize::test::ReadFileBytes(Path("museum/scans/scan.exr"));
   const std::string scan = Path("museum/scans/scan.exr");
   for (const std::string& out : {Path("museum"), Path("museum/scans"), scan, Path("museum/scans/"),
                                  Path("museum/scans/../scans"), dir_.string()}) {
     Output o = RunCli("preprocess " + scan + " --out " + out);
     EXPECT_EQ(o.exit_code, 1) << out << "\n" << o.text;
     EXPECT_NE(o.text.find("input"), std::string::npos) << o.text;
-    EXPECT_EQ(Bytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
+    EXPECT_EQ(digitize::test::ReadFileBytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
   }
   // The current directory, however it is spelled, and its parent.
   for (const std::string& out : {std::string("."), std::string("./"), Path("museum/scans"),
@@ -695,12 +685,12 @@ TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
     Output o = RunCli("preprocess scan.exr --out " + out, Path("museum/scans"));
     EXPECT_EQ(o.exit_code, 1) << out << "\n" << o.text;
     EXPECT_EQ(o.text.find("Success"), std::string::npos) << o.text;
-    EXPECT_EQ(Bytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
+    EXPECT_EQ(digitize::test::ReadFileBytes(Path("museum/scans/scan.exr")), scan_bytes) << out;
   }
   Output synth_here = RunCli("synth --resolution 96 --scan-size 96 96 --out .", Path("museum"));
   EXPECT_EQ(synth_here.exit_code, 1);
   EXPECT_NE(synth_here.text.find("current directory"), std::string::npos) << synth_here.text;
-  EXPECT_EQ(Bytes(Path("museum/notes.txt")), "irreplaceable");
+  EXPECT_EQ(digitize::test::ReadFileBytes(Path("museum/notes.txt")), "irreplaceable");
 
   // pack onto a file of its canvas folder; fit into its canvas; run onto one of its photos.
   ASSERT_EQ(RunCli("preprocess " + scan + " --out " + Path("c")).exit_code, 0);
@@ -708,24 +698,24 @@ TEST_F(CliTest, InputsAndTheCurrentDirectoryAreNeverOutputs) {
                    " --out " + Path("f"))
                 .exit_code,
             0);
-  const std::string height = Bytes(Path("c/height.exr"));
+  const std::string height = digitize::test::ReadFileBytes(Path("c/height.exr"));
   Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
                        Path("c/height.exr"));
   EXPECT_EQ(pack.exit_code, 1) << pack.text;
   EXPECT_NE(pack.text.find("c/height.exr: lies inside the input"), std::string::npos) << pack.text;
-  EXPECT_EQ(Bytes(Path("c/height.exr")), height);
+  EXPECT_EQ(digitize::test::ReadFileBytes(Path("c/height.exr")), height);
   Output fit = RunCli("fit --canvas " + Path("c") + " --photos " + Path("s/photos/calib.json") +
                       " --out " + Path("c"));
   EXPECT_EQ(fit.exit_code, 1) << fit.text;
-  EXPECT_EQ(Bytes(Path("c/height.exr")), height);
+  EXPECT_EQ(digitize::test::ReadFileBytes(Path("c/height.exr")), height);
   fs::path photo;
   for (const auto& e : fs::directory_iterator(Path("s/photos/images"))) photo = e.path();
-  const std::string photo_bytes = Bytes(photo);
+  const std::string photo_bytes = digitize::test::ReadFileBytes(photo);
   Output run = RunCli("run --photos " + Path("s/photos/calib.json") + " " + scan + " --out " +
                       photo.string());
   EXPECT_EQ(run.exit_code, 1) << run.text;
   EXPECT_NE(run.text.find("is the input"), std::string::npos) << run.text;
-  EXPECT_EQ(Bytes(photo), photo_bytes);
+  EXPECT_EQ(digitize::test::ReadFileBytes(photo), photo_bytes);
 }
 
 // A killed folder command leaves ".NAME.partial-PID-N/"; the next run removes those of dead

@@ -1,13 +1,15 @@
 // Core types every stage relies on: grids, transforms, results, and the all-or-nothing output
 // folder.
+#include "digitize/core.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
 #include <random>
 
-#include "digitize/core.h"
 #include "digitize/output_dir.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -63,22 +65,17 @@ TEST(Result, ValueOrErrorNeverBoth) {
 
 const FolderOutput kOutput{"test", "test", {}};
 
-class OutputDirTest : public ::testing::Test {
+class OutputDirTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    root_ = fs::temp_directory_path() / ("digitize_core_test_" + std::to_string(::getpid()));
-    fs::remove_all(root_);
-    fs::create_directories(root_);
-  }
-  void TearDown() override { fs::remove_all(root_); }
+  OutputDirTest() : ScratchDirTest("digitize_core_test", true, false) {}
   size_t Entries() const {
-    return static_cast<size_t>(std::distance(fs::directory_iterator(root_), fs::directory_iterator()));
+    return static_cast<size_t>(
+        std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
   }
-  fs::path root_;
 };
 
 TEST_F(OutputDirTest, SuccessReplacesAFailureKeepsTheOldSet) {
-  const fs::path out = root_ / "out";
+  const fs::path out = dir_ / "out";
   auto write = [](const std::string& text) {
     return [text](const fs::path& dir) {
       std::ofstream(dir / "a.txt") << text;
@@ -104,7 +101,7 @@ TEST_F(OutputDirTest, SuccessReplacesAFailureKeepsTheOldSet) {
 }
 
 TEST_F(OutputDirTest, AFileInTheWayIsNotReplaced) {
-  const fs::path out = root_ / "taken";
+  const fs::path out = dir_ / "taken";
   std::ofstream(out) << "keep";
   const Status s =
       WriteDirectoryAtomically(out, kOutput, [](const fs::path&) { return Status::Ok(); });

@@ -23,6 +23,7 @@
 #include "fuzz/parser_contract.h"
 #include "fuzz/viewer_contract.h"
 #include "pack_forge.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -40,13 +41,6 @@ std::vector<fs::path> CorpusFiles(const std::string& target) {
   }
   std::sort(files.begin(), files.end());
   return files;
-}
-
-std::string ReadBytes(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream bytes;
-  bytes << in.rdbuf();
-  return bytes.str();
 }
 
 bool StartsWith(const fs::path& file, const char* prefix) {
@@ -68,7 +62,7 @@ Tally ReplayCorpus(const std::string& target, Parses parses, Contract contract) 
   const auto files = CorpusFiles(target);
   EXPECT_FALSE(files.empty()) << "no corpus in " << CorpusDir(target);
   for (const fs::path& file : files) {
-    const std::string text = ReadBytes(file);
+    const std::string text = test::ReadFileBytes(file);
     // The real path as the source: errors must name it.
     EXPECT_EQ(contract(text, file), "") << file;
     const bool ok = parses(text, file);
@@ -184,14 +178,14 @@ TEST(FuzzCorpusTest, ReadersReportTheParsersErrors) {
   PhotoSetOptions headers_only;
   headers_only.load_pixels = false;
   for (const fs::path& file : CorpusFiles("fuzz_calibration")) {
-    const auto parsed = ParseCalibrationText(ReadBytes(file), file);
+    const auto parsed = ParseCalibrationText(test::ReadFileBytes(file), file);
     if (parsed.ok()) continue;
     const auto read = ReadCalibration(file, headers_only);
     ASSERT_FALSE(read.ok()) << file;
     EXPECT_EQ(read.error().message, parsed.error().message);
   }
   for (const fs::path& file : CorpusFiles("fuzz_lp")) {
-    const auto parsed = ParseRtiLightsText(ReadBytes(file), file);
+    const auto parsed = ParseRtiLightsText(test::ReadFileBytes(file), file);
     if (parsed.ok()) continue;
     const auto read = ReadRtiCapture(file, headers_only);
     ASSERT_FALSE(read.ok()) << file;
@@ -275,11 +269,6 @@ Pack TinyPack(int w, int h, bool with_box) {
   return p;
 }
 
-void WriteBytes(const fs::path& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << bytes;
-}
-
 // The same pack without compression: byte mutations then reach the values (ZIP data fails zlib's
 // own check on any change). The checksum covers decoded pixels, so it still holds.
 void RewriteUncompressed(const fs::path& from, const fs::path& to) {
@@ -317,12 +306,12 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   ASSERT_TRUE(WritePack(dir / "valid_quantised_9x5.exr", TinyPack(9, 5, false), quantised).ok());
 
   RewriteUncompressed(dir / "valid_half_8x8_box.exr", dir / "valid_uncompressed_8x8_box.exr");
-  const std::string good = ReadBytes(dir / "valid_half_8x8_box.exr");
+  const std::string good = test::ReadFileBytes(dir / "valid_half_8x8_box.exr");
   ASSERT_GT(good.size(), 200u);
-  WriteBytes(dir / "bad_truncated.exr", good.substr(0, good.size() * 2 / 3));
+  test::WriteFileBytes(dir / "bad_truncated.exr", good.substr(0, good.size() * 2 / 3));
   std::string flipped = good;
   flipped[flipped.size() - 20] ^= 0x10;  // in the last part's pixel data
-  WriteBytes(dir / "bad_bit_flip.exr", flipped);
+  test::WriteFileBytes(dir / "bad_bit_flip.exr", flipped);
   // A newer version: the digitize:version string attribute's value "1" becomes "9".
   const std::string key = std::string("digitize:version") + '\0' + "string" + '\0';
   const size_t at = good.find(key);
@@ -330,8 +319,8 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   std::string newer = good;
   ASSERT_EQ(newer[at + key.size() + 4], '1');
   newer[at + key.size() + 4] = '9';
-  WriteBytes(dir / "bad_newer_version.exr", newer);
-  WriteBytes(dir / "bad_not_exr.exr", "digitize.pack, but not an OpenEXR file\n");
+  test::WriteFileBytes(dir / "bad_newer_version.exr", newer);
+  test::WriteFileBytes(dir / "bad_not_exr.exr", "digitize.pack, but not an OpenEXR file\n");
   // Forged headers with a recomputed checksum (pack_forge.h): physically absurd metadata that
   // every finiteness check lets through (issue 10: pitch_mm = 1e308 aborted the viewer).
   const std::vector<std::pair<std::string, std::map<std::string, std::string>>> forged = {

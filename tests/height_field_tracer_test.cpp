@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "digitize_synth/painting.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -30,18 +31,6 @@ constexpr float kInf = std::numeric_limits<float>::infinity();
 constexpr double kHitTolMm = 1e-4;
 // Continuous texel coordinates from float hit positions (~1e-5 mm) at pitch 0.1 mm.
 constexpr double kTexelTol = 1e-3;
-
-HeightField MakeField(int w, int h, double pitch_mm,
-                      const std::function<float(int x, int y)>& f = nullptr) {
-  HeightField field;
-  field.pitch_mm = pitch_mm;
-  field.height_mm = Grid<float>(w, h, 0.0f);
-  field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  if (f)
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) field.height_mm(x, y) = f(x, y);
-  return field;
-}
 
 HeightFieldTracer BuildOrDie(const HeightField& field) {
   Result<HeightFieldTracer> t = HeightFieldTracer::Build(field);
@@ -101,7 +90,8 @@ Rays RandomUpwardRays(const HeightField& field, size_t count, double min_elevati
 // ---------------------------------------------------------------------------------------------
 
 TEST(HeightFieldTracer, BuildReportsSizeAndMaxHeight) {
-  const HeightField f = MakeField(9, 5, 0.25, [](int x, int y) { return 0.1f * x - 0.2f * y; });
+  const HeightField f =
+      test::MakeTexelField(9, 5, 0.25, [](int x, int y) { return 0.1f * x - 0.2f * y; });
   const HeightFieldTracer t = BuildOrDie(f);
   EXPECT_EQ(t.width(), 9);
   EXPECT_EQ(t.height(), 5);
@@ -112,7 +102,7 @@ TEST(HeightFieldTracer, BuildReportsSizeAndMaxHeight) {
 
 TEST(HeightFieldTracer, FlatFieldBlocksNothingAndSkipsEveryUpwardRay) {
   for (float level : {0.0f, 1.5f, -0.3f}) {
-    const HeightField f = MakeField(64, 48, 0.1, [&](int, int) { return level; });
+    const HeightField f = test::MakeTexelField(64, 48, 0.1, [&](int, int) { return level; });
     const HeightFieldTracer t = BuildOrDie(f);
     // Down to 1 degree: the lift and tnear keep even near-grazing rays off the plane.
     const Rays rays = RandomUpwardRays(f, 2000, 1.0, 11);
@@ -131,7 +121,7 @@ TEST(HeightFieldTracer, FlatFieldBlocksNothingAndSkipsEveryUpwardRay) {
 }
 
 TEST(HeightFieldTracer, StatsAccumulateAndEmptySpansAreFine) {
-  const HeightField f = MakeField(16, 16, 0.1);
+  const HeightField f = test::MakeTexelField(16, 16, 0.1);
   const HeightFieldTracer t = BuildOrDie(f);
   const Rays rays = RandomUpwardRays(f, 100, 10, 3);
   TraceStats s;
@@ -151,7 +141,7 @@ TEST(HeightFieldTracer, BoxBlocksRaysTowardsItOnly) {
   // 64 x 64 texels at 0.1 mm; a 2 mm box over texels x 40..47, y 28..35. Origin: texel (20, 32),
   // 2 mm (20 texels) west of the box's near face, on its row band.
   constexpr float kBox = 2.0f;
-  const HeightField f = MakeField(64, 64, 0.1, [](int x, int y) {
+  const HeightField f = test::MakeTexelField(64, 64, 0.1, [](int x, int y) {
     return (x >= 40 && x <= 47 && y >= 28 && y <= 35) ? kBox : 0.0f;
   });
   const HeightFieldTracer t = BuildOrDie(f);
@@ -185,8 +175,8 @@ TEST(HeightFieldTracer, ShadowOfAStepHasTheAnalyticLength) {
   // iff s < H / tan(e). Lengths are chosen as (k + 0.5) texels, so no texel grazes the crest.
   constexpr double kPitch = 0.1;
   constexpr float kWall = 1.0f;
-  const HeightField f =
-      MakeField(160, 12, kPitch, [](int x, int) { return x >= 40 && x <= 63 ? kWall : 0.0f; });
+  const HeightField f = test::MakeTexelField(
+      160, 12, kPitch, [](int x, int) { return x >= 40 && x <= 63 ? kWall : 0.0f; });
   const HeightFieldTracer t = BuildOrDie(f);
   for (int k : {0, 3, 10, 40, 90}) {
     const double length_mm = (k + 0.5) * kPitch;
@@ -220,7 +210,7 @@ TEST(HeightFieldTracer, SkippingChangesNothingOnARoughField) {
   constexpr int kW = 96, kH = 80;
   std::mt19937 rng(5);
   std::normal_distribution<float> noise(0.0f, 0.05f);
-  HeightField f = MakeField(kW, kH, 0.2, [&](int, int) { return noise(rng); });
+  HeightField f = test::MakeTexelField(kW, kH, 0.2, [&](int, int) { return noise(rng); });
   for (int b = 0; b < 6; ++b) {
     const int cx = static_cast<int>(rng() % kW), cy = static_cast<int>(rng() % kH);
     const float peak = 0.3f + 0.4f * b;
@@ -258,7 +248,7 @@ TEST(HeightFieldTracer, SkippingChangesNothingOnARoughField) {
 TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {
   std::mt19937 rng(9);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  const HeightField f = MakeField(128, 128, 0.1, [&](int x, int y) {
+  const HeightField f = test::MakeTexelField(128, 128, 0.1, [&](int x, int y) {
     return 0.5f * std::sin(0.2f * x) * std::cos(0.15f * y) + 0.05f * u(rng);
   });
   const HeightFieldTracer t = BuildOrDie(f);
@@ -292,8 +282,8 @@ TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {
 
 TEST(HeightFieldTracer, VerticalRaysHitTexelCentresWithTheRowFlip) {
   // Heights that differ per texel and per row, so a row flip would show.
-  const HeightField f =
-      MakeField(23, 17, 0.1, [](int x, int y) { return 0.01f * x + 0.1f * y + 0.002f * x * y; });
+  const HeightField f = test::MakeTexelField(
+      23, 17, 0.1, [](int x, int y) { return 0.01f * x + 0.1f * y + 0.002f * x * y; });
   const HeightFieldTracer t = BuildOrDie(f);
   std::vector<Vec3f> origins, dirs;
   for (int y = 0; y < f.height(); ++y)
@@ -325,7 +315,7 @@ TEST(HeightFieldTracer, ObliqueRaysHitATiltedPlaneWhereTheAlgebraSays) {
   // Plane z = a X + b Y + c (exact on the grid: it is linear). Ray o + t d meets it at
   // t = (a ox + b oy + c - oz) / (dz - a dx - b dy).
   constexpr double a = 0.05, b = -0.02, c = 0.3, kPitch = 0.1;
-  HeightField f = MakeField(200, 150, kPitch);
+  HeightField f = test::MakeTexelField(200, 150, kPitch);
   for (int y = 0; y < f.height(); ++y)
     for (int x = 0; x < f.width(); ++x) {
       const Eigen::Vector2d p = f.TexelCentreMm(x, y);
@@ -361,8 +351,8 @@ TEST(HeightFieldTracer, ObliqueRaysHitATiltedPlaneWhereTheAlgebraSays) {
 }
 
 TEST(HeightFieldTracer, LongSpansRunInParallelWithTheSameAnswer) {
-  const HeightField f =
-      MakeField(100, 100, 0.1, [](int x, int y) { return 0.4f * std::sin(0.3f * x + 0.1f * y); });
+  const HeightField f = test::MakeTexelField(
+      100, 100, 0.1, [](int x, int y) { return 0.4f * std::sin(0.3f * x + 0.1f * y); });
   const HeightFieldTracer t = BuildOrDie(f);
   const Rays rays = RandomUpwardRays(f, 30000, 2.0, 8);
   std::vector<uint8_t> one(rays.size()), two(rays.size()), all(rays.size());
@@ -380,12 +370,12 @@ TEST(HeightFieldTracer, LongSpansRunInParallelWithTheSameAnswer) {
 }
 
 TEST(HeightFieldTracer, MoveKeepsTheScene) {
-  const HeightField f = MakeField(8, 8, 0.5, [](int x, int) { return 0.25f * x; });
+  const HeightField f = test::MakeTexelField(8, 8, 0.5, [](int x, int) { return 0.25f * x; });
   HeightFieldTracer a = BuildOrDie(f);
   HeightFieldTracer b = std::move(a);
   EXPECT_EQ(b.width(), 8);
   EXPECT_FLOAT_EQ(b.max_height_mm(), 1.75f);
-  HeightFieldTracer c = BuildOrDie(MakeField(3, 3, 1.0));
+  HeightFieldTracer c = BuildOrDie(test::MakeTexelField(3, 3, 1.0));
   c = std::move(b);
   EXPECT_EQ(c.pitch_mm(), 0.5);
   EXPECT_THROW((void)a.width(), InvariantError);  // NOLINT(bugprone-use-after-move): on purpose
@@ -397,16 +387,16 @@ TEST(HeightFieldTracer, DegenerateFieldsAreErrors) {
     return t.ok() ? std::string("(built)") : t.error().message;
   };
   EXPECT_NE(message(HeightField{}).find("empty"), std::string::npos);
-  EXPECT_NE(message(MakeField(1, 7, 0.1)).find("1x7"), std::string::npos);
-  EXPECT_NE(message(MakeField(7, 1, 0.1)).find("7x1"), std::string::npos);
-  EXPECT_NE(message(MakeField(4, 4, 0.0)).find("pitch_mm"), std::string::npos);
-  EXPECT_NE(message(MakeField(4, 4, -1.0)).find("pitch_mm"), std::string::npos);
-  EXPECT_NE(message(MakeField(4, 4, std::nan(""))).find("pitch_mm"), std::string::npos);
-  EXPECT_EQ(message(MakeField(2, 2, 0.1)), "(built)");
+  EXPECT_NE(message(test::MakeTexelField(1, 7, 0.1)).find("1x7"), std::string::npos);
+  EXPECT_NE(message(test::MakeTexelField(7, 1, 0.1)).find("7x1"), std::string::npos);
+  EXPECT_NE(message(test::MakeTexelField(4, 4, 0.0)).find("pitch_mm"), std::string::npos);
+  EXPECT_NE(message(test::MakeTexelField(4, 4, -1.0)).find("pitch_mm"), std::string::npos);
+  EXPECT_NE(message(test::MakeTexelField(4, 4, std::nan(""))).find("pitch_mm"), std::string::npos);
+  EXPECT_EQ(message(test::MakeTexelField(2, 2, 0.1)), "(built)");
 }
 
 TEST(HeightFieldTracer, NonFiniteHeightIsAnErrorNamingTheTexel) {
-  HeightField f = MakeField(10, 6, 0.1);
+  HeightField f = test::MakeTexelField(10, 6, 0.1);
   f.height_mm(7, 4) = std::numeric_limits<float>::quiet_NaN();
   std::string m = HeightFieldTracer::Build(f).error().message;
   EXPECT_NE(m.find("(7, 4)"), std::string::npos) << m;
@@ -418,7 +408,7 @@ TEST(HeightFieldTracer, NonFiniteHeightIsAnErrorNamingTheTexel) {
 }
 
 TEST(HeightFieldTracer, BadCallsThrow) {
-  const HeightField f = MakeField(8, 8, 0.1);
+  const HeightField f = test::MakeTexelField(8, 8, 0.1);
   const HeightFieldTracer t = BuildOrDie(f);
   std::vector<Vec3f> o(3, Vec3f(0.4f, 0.4f, 0)), d(3, Vec3f(0, 0, 1));
   std::vector<float> tf(3, kInf);

@@ -15,6 +15,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/scan_io.h"
+#include "test_support.h"
 
 // OpenImageIO 2.4's PNG reader fetches an error string (ImageInput::geterror) in its libpng read
 // callback, then libpng longjmps past its destructor: a truncated PNG leaks ~30 bytes inside the
@@ -28,18 +29,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class IoTest : public ::testing::Test {
+class IoTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() /
-           ("digitize_io_test_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
-  fs::path Path(const std::string& name) const { return dir_ / name; }
+  IoTest() : ScratchDirTest("digitize_io_test") {}
 
   // Everything in the test directory, for "no file / no temp file left behind" checks.
   std::vector<std::string> Listing() const {
@@ -50,8 +42,6 @@ class IoTest : public ::testing::Test {
     std::sort(names.begin(), names.end());
     return names;
   }
-
-  fs::path dir_;
 };
 
 std::string Lower(std::string s) {
@@ -103,19 +93,9 @@ void WriteUint16(const fs::path& path, const Grid<uint16_t>& counts) {
   ASSERT_TRUE(out->close());
 }
 
-void WriteBytes(const fs::path& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
-
-std::string ReadBytes(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
 void Truncate(const fs::path& path) {
-  const std::string bytes = ReadBytes(path);
-  WriteBytes(path, bytes.substr(0, bytes.size() / 2));
+  const std::string bytes = test::ReadFileBytes(path);
+  test::WriteFileBytes(path, bytes.substr(0, bytes.size() / 2));
 }
 
 bool SameBits(float a, float b) { return std::memcmp(&a, &b, sizeof(float)) == 0; }
@@ -245,7 +225,7 @@ TEST_F(IoTest, PlyGridRoundTrip) {
     for (int x = 0; x < 4; ++x)
       text += std::to_string(x * 0.5) + " " + std::to_string(y * 0.5) + " " +
               std::to_string(200 + x + 10 * y) + "\n";
-  WriteBytes(path, text);
+  test::WriteFileBytes(path, text);
   auto scan = ReadScan(path, {});
   ASSERT_TRUE(scan.ok()) << scan.error().message;
   ASSERT_EQ(scan->xyz_mm.width, 4);
@@ -258,7 +238,7 @@ TEST_F(IoTest, PlyGridRoundTrip) {
   const fs::path bare = Path("bare.ply");
   std::string bare_text = text;
   bare_text.erase(bare_text.find("comment grid 4 3\n"), 17);
-  WriteBytes(bare, bare_text);
+  test::WriteFileBytes(bare, bare_text);
   ExpectErrorAbout(ReadScan(bare, {}), bare, "grid");
   ScanReadOptions options;
   options.grid_width = 4;
@@ -278,7 +258,7 @@ TEST_F(IoTest, BinaryPlyKeepsNaN) {
       "property float x\nproperty float y\nproperty float z\nend_header\n";
   const float values[12] = {0, 0, 5, 1, 0, 6, 0, 1, kMissing, 1, 1, 8};
   bytes.append(reinterpret_cast<const char*>(values), sizeof(values));
-  WriteBytes(path, bytes);
+  test::WriteFileBytes(path, bytes);
   auto scan = ReadScan(path, {});
   ASSERT_TRUE(scan.ok()) << scan.error().message;
   EXPECT_EQ(scan->xyz_mm(1, 0), Vec3f(1, 0, 6));
@@ -289,11 +269,12 @@ TEST_F(IoTest, BinaryPlyKeepsNaN) {
 // OpenMesh's ASCII reader turns "nan" and everything after it into zeros; ours must not.
 TEST_F(IoTest, AsciiPlyKeepsNaNAndExtraProperties) {
   const fs::path path = Path("grid.ply");
-  WriteBytes(path,
-             "ply\r\nformat ascii 1.0\r\ncomment grid 2 2\r\nelement vertex 4\r\n"
-             "property double z\r\nproperty float x\r\nproperty float nx\r\nproperty float y\r\n"
-             "element face 0\r\nproperty list uchar int vertex_indices\r\nend_header\r\n"
-             "5 0 0.1 0\r\nnan 1 0.2 0\r\n+7e0 0 0.3 1\r\n  8\t1 0.4 1  \r\n");
+  test::WriteFileBytes(
+      path,
+      "ply\r\nformat ascii 1.0\r\ncomment grid 2 2\r\nelement vertex 4\r\n"
+      "property double z\r\nproperty float x\r\nproperty float nx\r\nproperty float y\r\n"
+      "element face 0\r\nproperty list uchar int vertex_indices\r\nend_header\r\n"
+      "5 0 0.1 0\r\nnan 1 0.2 0\r\n+7e0 0 0.3 1\r\n  8\t1 0.4 1  \r\n");
   auto scan = ReadScan(path, {});
   ASSERT_TRUE(scan.ok()) << scan.error().message;
   EXPECT_EQ(scan->xyz_mm(0, 0), Vec3f(0, 0, 5));
@@ -307,18 +288,18 @@ TEST_F(IoTest, CorruptAsciiPly) {
       "ply\nformat ascii 1.0\ncomment grid 2 2\nelement vertex 4\nproperty float x\n"
       "property float y\nproperty float z\nend_header\n";
   const fs::path bad_number = Path("bad_number.ply");
-  WriteBytes(bad_number, header + "0 0 1\n1 0 abc\n0 1 1\n1 1 1\n");
+  test::WriteFileBytes(bad_number, header + "0 0 1\n1 0 abc\n0 1 1\n1 1 1\n");
   ExpectErrorAbout(ReadScan(bad_number, {}), bad_number, "not a number");
   const fs::path short_line = Path("short_line.ply");
-  WriteBytes(short_line, header + "0 0 1\n1 0\n0 1 1\n1 1 1\n");
+  test::WriteFileBytes(short_line, header + "0 0 1\n1 0\n0 1 1\n1 1 1\n");
   ExpectErrorAbout(ReadScan(short_line, {}), short_line, "2 values");
   const fs::path cut = Path("cut.ply");
-  WriteBytes(cut, header + "0 0 1\n1 0 1\n");
+  test::WriteFileBytes(cut, header + "0 0 1\n1 0 1\n");
   ExpectErrorAbout(ReadScan(cut, {}), cut, "truncated");
   const fs::path no_z = Path("no_z.ply");
-  WriteBytes(no_z,
-             "ply\nformat ascii 1.0\ncomment grid 1 1\nelement vertex 1\n"
-             "property float x\nproperty float y\nend_header\n0 0\n");
+  test::WriteFileBytes(no_z,
+                       "ply\nformat ascii 1.0\ncomment grid 1 1\nelement vertex 1\n"
+                       "property float x\nproperty float y\nend_header\n0 0\n");
   ExpectErrorAbout(ReadScan(no_z, {}), no_z, "no x, y and z");
 }
 
@@ -357,7 +338,7 @@ TEST_F(IoTest, WriteTextFileReplacesContent) {
   const fs::path path = Path("report.json");
   ASSERT_TRUE(WriteTextFile(path, "old").ok());
   ASSERT_TRUE(WriteTextFile(path, "{\"new\": 1}\n").ok());
-  EXPECT_EQ(ReadBytes(path), "{\"new\": 1}\n");
+  EXPECT_EQ(test::ReadFileBytes(path), "{\"new\": 1}\n");
   EXPECT_EQ(Listing(), std::vector<std::string>{"report.json"});
 }
 
@@ -369,7 +350,7 @@ TEST_F(IoTest, FailingWriterLeavesNoFileAndNoTemp) {
   fs::path seen_temp;
   const Status status = WriteAtomically(path, [&](const fs::path& temp) -> Status {
     seen_temp = temp;
-    WriteBytes(temp, "half a file");
+    test::WriteFileBytes(temp, "half a file");
     return Error{"out.exr: disk full (simulated)"};
   });
   EXPECT_FALSE(status.ok());
@@ -381,18 +362,18 @@ TEST_F(IoTest, FailingWriterLeavesNoFileAndNoTemp) {
 
 TEST_F(IoTest, FailingWriterLeavesExistingTargetUntouched) {
   const fs::path path = Path("report.json");
-  WriteBytes(path, "the old report");
+  test::WriteFileBytes(path, "the old report");
   const Status failed = WriteAtomically(path, [&](const fs::path& temp) -> Status {
-    WriteBytes(temp, "partial");
+    test::WriteFileBytes(temp, "partial");
     return Error{"report.json: simulated failure"};
   });
   EXPECT_FALSE(failed.ok());
   const Status threw = WriteAtomically(path, [&](const fs::path& temp) -> Status {
-    WriteBytes(temp, "partial");
+    test::WriteFileBytes(temp, "partial");
     throw std::runtime_error("writer crashed");
   });
   ExpectErrorAbout(threw.message(), path, "writer crashed");
-  EXPECT_EQ(ReadBytes(path), "the old report");
+  EXPECT_EQ(test::ReadFileBytes(path), "the old report");
   EXPECT_EQ(Listing(), std::vector<std::string>{"report.json"});
 }
 
@@ -422,7 +403,7 @@ TEST_F(IoTest, MissingFile) {
 
 TEST_F(IoTest, EmptyFile) {
   for (const char* name : {"empty.exr", "empty.png", "empty.ply"}) {
-    WriteBytes(Path(name), "");
+    test::WriteFileBytes(Path(name), "");
     ExpectErrorAbout(ReadScan(Path(name), {}), Path(name), "empty");
   }
 }
@@ -454,11 +435,11 @@ TEST_F(IoTest, GarbageWithExrExtension) {
   std::mt19937 rng(7);
   std::string bytes(4096, '\0');
   for (auto& b : bytes) b = static_cast<char>(rng());
-  WriteBytes(path, bytes);
+  test::WriteFileBytes(path, bytes);
   ExpectErrorAbout(ReadScan(path, {}), path, "unreadable");
   // The real EXR magic followed by garbage: the header parser itself gets hostile bytes.
   bytes[0] = 0x76, bytes[1] = 0x2f, bytes[2] = 0x31, bytes[3] = 0x01;
-  WriteBytes(path, bytes);
+  test::WriteFileBytes(path, bytes);
   ASSERT_FALSE(ReadScan(path, {}).ok());
 }
 
@@ -498,23 +479,24 @@ TEST_F(IoTest, MaskOfWrongSize) {
 
 TEST_F(IoTest, PlyWithWrongVertexCount) {
   const fs::path path = Path("short.ply");
-  WriteBytes(path,
-             "ply\nformat ascii 1.0\ncomment grid 3 3\nelement vertex 8\nproperty float x\n"
-             "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n"
-             "1 1 0\n2 1 0\n0 2 0\n1 2 0\n");
+  test::WriteFileBytes(
+      path,
+      "ply\nformat ascii 1.0\ncomment grid 3 3\nelement vertex 8\nproperty float x\n"
+      "property float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n"
+      "1 1 0\n2 1 0\n0 2 0\n1 2 0\n");
   ExpectErrorAbout(ReadScan(path, {}), path, "vertex count");
   // The header promises 9 vertices, the body holds 4: truncated.
   const fs::path cut = Path("cut.ply");
-  WriteBytes(cut,
-             "ply\nformat binary_little_endian 1.0\ncomment grid 3 3\nelement vertex 9\n"
-             "property float x\nproperty float y\nproperty float z\nend_header\n" +
-                 std::string(4 * 12, '\0'));
+  test::WriteFileBytes(cut,
+                       "ply\nformat binary_little_endian 1.0\ncomment grid 3 3\nelement vertex 9\n"
+                       "property float x\nproperty float y\nproperty float z\nend_header\n" +
+                           std::string(4 * 12, '\0'));
   ASSERT_FALSE(ReadScan(cut, {}).ok());
   const fs::path not_ply = Path("text.ply");
-  WriteBytes(not_ply, "hello\nworld\n");
+  test::WriteFileBytes(not_ply, "hello\nworld\n");
   ExpectErrorAbout(ReadScan(not_ply, {}), not_ply, "not a PLY");
   const fs::path no_end = Path("no_end.ply");
-  WriteBytes(no_end, "ply\nformat ascii 1.0\nelement vertex 4\n");
+  test::WriteFileBytes(no_end, "ply\nformat ascii 1.0\nelement vertex 4\n");
   ExpectErrorAbout(ReadScan(no_end, {}), no_end, "end_header");
 }
 
@@ -528,10 +510,10 @@ TEST_F(IoTest, AbsurdSizesAreRefusedBeforeAllocating) {
   EXPECT_TRUE(ReadImage(path, 1200).ok());
   // A PLY header claiming 10^15 vertices must not be believed.
   const fs::path huge = Path("huge.ply");
-  WriteBytes(huge,
-             "ply\nformat binary_little_endian 1.0\ncomment grid 1000000000 1000000\n"
-             "element vertex 1000000000000000\nproperty float x\nproperty float y\n"
-             "property float z\nend_header\n");
+  test::WriteFileBytes(huge,
+                       "ply\nformat binary_little_endian 1.0\ncomment grid 1000000000 1000000\n"
+                       "element vertex 1000000000000000\nproperty float x\nproperty float y\n"
+                       "property float z\nend_header\n");
   ExpectErrorAbout(ReadScan(huge, {}), huge, "too large");
 }
 

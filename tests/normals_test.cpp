@@ -12,6 +12,7 @@
 
 #include "digitize/height_field.h"
 #include "digitize_synth/painting.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -19,22 +20,6 @@ namespace {
 // Float normals of exact data: normalising in double then rounding to float leaves each component
 // within one float ulp of 1 (6e-8); a few ulps of slack.
 constexpr double kUnitTol = 1e-6;
-
-HeightField MakeField(int w, int h, double pitch_mm,
-                      const std::function<double(double X, double Y)>& f = nullptr) {
-  HeightField field;
-  field.pitch_mm = pitch_mm;
-  field.height_mm = Grid<float>(w, h, 0.0f);
-  field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  if (f) {
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        const Eigen::Vector2d c = field.TexelCentreMm(x, y);
-        field.height_mm(x, y) = static_cast<float>(f(c.x(), c.y()));
-      }
-  }
-  return field;
-}
 
 Vec3d PlaneNormal(double a, double b) { return Vec3d(-a, -b, 1.0).normalized(); }
 
@@ -80,17 +65,17 @@ void ExpectAllUnitUp(const Grid<Vec3f>& n) {
 }
 
 TEST(Normals, EmptyGrid) {
-  const HeightField field = MakeField(0, 0, 0.1);
+  const HeightField field = test::MakeMmField(0, 0, 0.1);
   EXPECT_TRUE(ComputeNormals(field).empty());
 }
 
 TEST(Normals, FlatCanvasIsExactlyUp) {
-  const Grid<Vec3f> n = ComputeNormals(MakeField(31, 17, 0.1));
+  const Grid<Vec3f> n = ComputeNormals(test::MakeMmField(31, 17, 0.1));
   for (const Vec3f& v : n.data) EXPECT_EQ(v, Vec3f(0, 0, 1));
 }
 
 TEST(Normals, AllOutsideIsUp) {
-  HeightField field = MakeField(9, 7, 0.1, [](double X, double Y) { return X * Y; });
+  HeightField field = test::MakeMmField(9, 7, 0.1, [](double X, double Y) { return X * Y; });
   for (auto& s : field.state.data) s = TexelState::kOutside;
   for (const Vec3f& v : ComputeNormals(field).data) EXPECT_EQ(v, Vec3f(0, 0, 1));
 }
@@ -101,7 +86,7 @@ TEST(Normals, AllOutsideIsUp) {
 TEST(Normals, TiltedPlaneDyadicIsExactEverywhere) {
   const double a = 0.25, b = -0.375;
   const HeightField field =
-      MakeField(37, 23, 0.125, [&](double X, double Y) { return a * X + b * Y; });
+      test::MakeMmField(37, 23, 0.125, [&](double X, double Y) { return a * X + b * Y; });
   const Vec3d expected = PlaneNormal(a, b);
   const Grid<Vec3f> n = ComputeNormals(field);
   for (int y = 0; y < n.height; ++y)
@@ -115,7 +100,7 @@ TEST(Normals, TiltedPlaneDyadicIsExactEverywhere) {
 TEST(Normals, TiltedPlaneGenericWithinFloatRounding) {
   const double a = 0.37, b = 0.81, pitch = 0.07;
   const HeightField field =
-      MakeField(200, 150, pitch, [&](double X, double Y) { return a * X + b * Y; });
+      test::MakeMmField(200, 150, pitch, [&](double X, double Y) { return a * X + b * Y; });
   double h_max = 0;
   for (float v : field.height_mm.data) h_max = std::max(h_max, std::abs(double{v}));
   const double ulp = std::nextafter(static_cast<float>(h_max), 1e30f) - static_cast<float>(h_max);
@@ -131,12 +116,13 @@ TEST(Normals, TiltedPlaneGenericWithinFloatRounding) {
 // The row flip: row 0 is the top (largest Y). A surface rising towards the top rows has an
 // upward slope along +Y, so its normal leans to -Y.
 TEST(Normals, RowFlipSign) {
-  const HeightField field = MakeField(8, 8, 0.125, [](double, double Y) { return 0.5 * Y; });
+  const HeightField field =
+      test::MakeMmField(8, 8, 0.125, [](double, double Y) { return 0.5 * Y; });
   ASSERT_GT(field.height_mm(3, 0), field.height_mm(3, 7));  // row 0 is higher
   const Grid<Vec3f> n = ComputeNormals(field);
   EXPECT_LT(n(3, 3).y(), -0.4f);
   EXPECT_NEAR(n(3, 3).x(), 0.0f, 1e-7);
-  const HeightField east = MakeField(8, 8, 0.125, [](double X, double) { return 0.5 * X; });
+  const HeightField east = test::MakeMmField(8, 8, 0.125, [](double X, double) { return 0.5 * X; });
   EXPECT_LT(ComputeNormals(east)(3, 3).x(), -0.4f);  // rising to the east leans west
 }
 
@@ -145,7 +131,8 @@ TEST(Normals, RowFlipSign) {
 // left (or no height themselves) get (0, 0, 1).
 TEST(Normals, PlaneWithHolesExactWhereAnyTriangleRemains) {
   const double a = -0.5, b = 0.125;
-  HeightField field = MakeField(41, 29, 0.25, [&](double X, double Y) { return a * X + b * Y; });
+  HeightField field =
+      test::MakeMmField(41, 29, 0.25, [&](double X, double Y) { return a * X + b * Y; });
   std::mt19937 rng(7);
   std::uniform_int_distribution<int> pick(0, 9);
   for (auto& s : field.state.data) {
@@ -180,7 +167,7 @@ TEST(Normals, PlaneWithHolesExactWhereAnyTriangleRemains) {
 // holes. Both sides sum in double; they differ by operation order (~1e-15) plus the rounding of
 // the result to float.
 TEST(Normals, MatchesBruteForceReferenceOnRandomSurface) {
-  HeightField field = MakeField(57, 43, 0.1);
+  HeightField field = test::MakeMmField(57, 43, 0.1);
   std::mt19937 rng(11);
   std::normal_distribution<float> height(0.0f, 0.3f);
   std::uniform_int_distribution<int> pick(0, 19);
@@ -199,7 +186,7 @@ TEST(Normals, MatchesBruteForceReferenceOnRandomSurface) {
 // cross-row smoothing averages a linear term symmetrically.
 TEST(Normals, ParaboloidIsExactUpToFloatRounding) {
   const double c = 0.02, pitch = 0.125, cx = 6.0, cy = 4.0;  // paraboloid centred at (cx, cy) mm
-  const HeightField field = MakeField(96, 64, pitch, [&](double X, double Y) {
+  const HeightField field = test::MakeMmField(96, 64, pitch, [&](double X, double Y) {
     return 0.5 * c * ((X - cx) * (X - cx) + (Y - cy) * (Y - cy)) + 0.01 * (X - cx) * (Y - cy);
   });
   const Grid<Vec3f> n = ComputeNormals(field);
@@ -226,7 +213,7 @@ TEST(Normals, ParaboloidIsExactUpToFloatRounding) {
 double SphereCapMaxErrorRad(double pitch) {
   const double R = 10.0, extent = 16.0, cx = 8.0, cy = 8.0;
   const int size = static_cast<int>(std::lround(extent / pitch));
-  const HeightField field = MakeField(size, size, pitch, [&](double X, double Y) {
+  const HeightField field = test::MakeMmField(size, size, pitch, [&](double X, double Y) {
     const double r2 = (X - cx) * (X - cx) + (Y - cy) * (Y - cy);
     return std::sqrt(std::max(R * R - r2, 0.0)) - 6.0;  // heights in [-6, 4]: small float ulp
   });
@@ -255,17 +242,17 @@ TEST(Normals, SphereCapSecondOrderAccurate) {
 TEST(Normals, OneByNAndNByOne) {
   const auto f = [](double X, double Y) { return 0.3 * X - 0.2 * Y; };
   for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 50}, std::pair{50, 1}}) {
-    const Grid<Vec3f> n = ComputeNormals(MakeField(w, h, 0.1, f));
+    const Grid<Vec3f> n = ComputeNormals(test::MakeMmField(w, h, 0.1, f));
     ASSERT_EQ(n.width, w);
     ASSERT_EQ(n.height, h);
     for (const Vec3f& v : n.data) EXPECT_EQ(v, Vec3f(0, 0, 1));
   }
   const HeightField two =
-      MakeField(2, 2, 0.125, [](double X, double Y) { return 0.25 * X + 0.5 * Y; });
+      test::MakeMmField(2, 2, 0.125, [](double X, double Y) { return 0.25 * X + 0.5 * Y; });
   for (const Vec3f& v : ComputeNormals(two).data)
     EXPECT_LT((v.cast<double>() - PlaneNormal(0.25, 0.5)).norm(), kUnitTol);
   const HeightField strip =
-      MakeField(2, 40, 0.125, [](double X, double Y) { return 0.25 * X - Y; });
+      test::MakeMmField(2, 40, 0.125, [](double X, double Y) { return 0.25 * X - Y; });
   for (const Vec3f& v : ComputeNormals(strip).data)
     EXPECT_LT((v.cast<double>() - PlaneNormal(0.25, -1.0)).norm(), kUnitTol);
 }
@@ -273,7 +260,7 @@ TEST(Normals, OneByNAndNByOne) {
 // Hostile magnitudes: heights up to 1e6 mm (and FLT_MAX) at a 1e-6 mm pitch give slopes near
 // 1e12 or more; squares overflow float, so the normal must still be finite, unit, and up.
 TEST(Normals, HugeHeightsAndTinyPitchStayFinite) {
-  HeightField field = MakeField(33, 21, 1e-6);
+  HeightField field = test::MakeMmField(33, 21, 1e-6);
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(-1e6f, 1e6f);
   for (auto& h : field.height_mm.data) h = u(rng);
@@ -283,7 +270,8 @@ TEST(Normals, HugeHeightsAndTinyPitchStayFinite) {
   ExpectAllUnitUp(ComputeNormals(field));
 
   // A very steep plane still has the right direction.
-  const HeightField steep = MakeField(16, 16, 1e-6, [](double X, double) { return 1e6 * X; });
+  const HeightField steep =
+      test::MakeMmField(16, 16, 1e-6, [](double X, double) { return 1e6 * X; });
   for (const Vec3f& v : ComputeNormals(steep).data) {
     EXPECT_NEAR(v.x(), -1.0f, 1e-6f);
     EXPECT_GT(v.z(), 0.0f);
@@ -292,7 +280,7 @@ TEST(Normals, HugeHeightsAndTinyPitchStayFinite) {
 
 // A non-finite height breaks the HeightField contract; it is treated as missing, not spread.
 TEST(Normals, NonFiniteHeightIsLeftOut) {
-  HeightField field = MakeField(12, 12, 0.125, [](double X, double) { return 0.25 * X; });
+  HeightField field = test::MakeMmField(12, 12, 0.125, [](double X, double) { return 0.25 * X; });
   field.height_mm(5, 5) = std::numeric_limits<float>::quiet_NaN();
   field.height_mm(8, 2) = std::numeric_limits<float>::infinity();
   const Grid<Vec3f> n = ComputeNormals(field);
@@ -339,7 +327,7 @@ TEST(Normals, SyntheticPaintingMatchesAnalyticNormals) {
 }
 
 TEST(Normals, BrokenFieldThrows) {
-  HeightField field = MakeField(4, 4, 0.0);
+  HeightField field = test::MakeMmField(4, 4, 0.0);
   EXPECT_THROW(ComputeNormals(field), InvariantError);
   field.pitch_mm = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(ComputeNormals(field), InvariantError);

@@ -21,6 +21,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "pack_forge.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -34,11 +35,7 @@ namespace fs = std::filesystem;
   } while (0)
 
 fs::path TempDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() /
-                       ("digitize_pack_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  return test::FreshScratchDir("digitize_pack_test_" + name);
 }
 
 std::vector<char> ReadBytes(const fs::path& p) {

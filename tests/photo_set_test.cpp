@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "test_support.h"
+
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.
 extern "C" const char* __lsan_default_suppressions() {
   return "leak:OpenImageIO_v2_4::ImageInput::geterror\n";
@@ -40,17 +42,9 @@ fs::path RtiIconDir() {
 
 double SrgbExact(double c) { return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4); }
 
-class PhotoSetTest : public ::testing::Test {
+class PhotoSetTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() /
-           ("digitize_photo_test_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path Path(const std::string& name) const { return dir_ / name; }
+  PhotoSetTest() : ScratchDirTest("digitize_photo_test") {}
 
   void WriteText(const std::string& name, const std::string& text) const {
     std::ofstream out(Path(name), std::ios::binary);
@@ -69,8 +63,6 @@ class PhotoSetTest : public ::testing::Test {
     ASSERT_TRUE(out->write_image(type, values.data())) << out->geterror();
     ASSERT_TRUE(out->close());
   }
-
-  fs::path dir_;
 };
 
 std::string Lower(std::string s) {

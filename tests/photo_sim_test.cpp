@@ -26,6 +26,7 @@
 #include "digitize/photo_set.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_support.h"
 
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.
 extern "C" const char* __lsan_default_suppressions() {
@@ -137,16 +138,9 @@ bool SameRgb(const Grid<Vec3f>& a, const Grid<Vec3f>& b) {
          std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(Vec3f)) == 0;
 }
 
-class PhotoSimTest : public ::testing::Test {
+class PhotoSimTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("digitize_photosim_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
+  PhotoSimTest() : ScratchDirTest("digitize_photosim_test", /*create=*/false) {}
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -882,8 +876,7 @@ TEST(PhotoSimOptionsTest, ProgressRisesToOneUnderTheStepRender) {
 // The command line.
 
 int RunCli(const std::string& args, std::string* output) {
-  const fs::path log =
-      fs::temp_directory_path() / ("digitize_photosim_cli_" + std::to_string(::getpid()) + ".log");
+  const fs::path log = test::ScratchPath("digitize_photosim_cli").string() + ".log";
   const std::string command =
       std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
   const int status = std::system(command.c_str());

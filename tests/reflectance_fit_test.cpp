@@ -15,19 +15,14 @@
 #include "digitize/reflectance_samples.h"
 #include "digitize/relight.h"
 #include "digitize/tangent_frame.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
 
 constexpr double kPitch = 0.5;  // mm per texel and per pixel
 
-HeightField FlatCanvas(int w, int h) {
-  HeightField f;
-  f.height_mm = Grid<float>(w, h, 0.0f);
-  f.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  f.pitch_mm = kPitch;
-  return f;
-}
+HeightField FlatCanvas(int w, int h) { return test::MakeFlatField(w, h, kPitch); }
 
 // Orthographic camera 1 m above the canvas, looking down, pixel (x, y) = texel (x, y).
 Camera TopCamera(int w, int h) {
@@ -379,8 +374,7 @@ TEST(ReflectanceFit, MapsRoundTripThroughTheOutputFolder) {
   ReflectanceFitOptions o;
   auto fit = FitReflectance(canvas, UpNormals(canvas), {}, set, o);
   ASSERT_TRUE(fit.ok());
-  const auto dir = std::filesystem::temp_directory_path() / "digitize_reflectance_roundtrip";
-  std::filesystem::remove_all(dir);
+  const auto dir = test::FreshScratchDir("digitize_reflectance_roundtrip", "", /*create=*/false);
   ASSERT_TRUE(WriteReflectanceOutputs(dir, *fit, o, {"analytic"}).ok());
   auto back = ReadReflectanceMaps(dir);
   ASSERT_TRUE(back.ok()) << back.error().message;

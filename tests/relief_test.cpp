@@ -13,17 +13,10 @@
 
 #include "digitize/height_field.h"
 #include "digitize_synth/painting.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
-
-HeightField MakeField(int w, int h, double pitch_mm, float fill = 0.0f) {
-  HeightField field;
-  field.pitch_mm = pitch_mm;
-  field.height_mm = Grid<float>(w, h, fill);
-  field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  return field;
-}
 
 ReliefOptions Options(int cell_px, double min_area_mm2 = 0.0, double fraction = 0.3,
                       double margin_mm = 0.0) {
@@ -168,7 +161,7 @@ TEST(ReliefOptions, EachBadValueIsNamed) {
 }
 
 TEST(Relief, InvalidOptionsOrBrokenFieldThrow) {
-  const HeightField f = MakeField(4, 4, 0.1, 1.0f);
+  const HeightField f = test::MakeFlatField(4, 4, 0.1, 1.0f);
   EXPECT_THROW(ClassifyRelief(f, Options(0)), InvariantError);
   HeightField bad_pitch = f;
   bad_pitch.pitch_mm = 0;
@@ -179,14 +172,14 @@ TEST(Relief, InvalidOptionsOrBrokenFieldThrow) {
 }
 
 TEST(Relief, EmptyGrid) {
-  const HeightField f = MakeField(0, 0, 0.1);
+  const HeightField f = test::MakeFlatField(0, 0, 0.1);
   const ReliefResult r = ClassifyRelief(f, ReliefOptions{});
   ExpectNoRelief(r, f);
   EXPECT_EQ(r.delta0_mm, 0.0);
 }
 
 TEST(Relief, FlatCanvasHasNoBoxes) {
-  const HeightField f = MakeField(64, 48, 0.1);
+  const HeightField f = test::MakeFlatField(64, 48, 0.1);
   const ReliefResult r = ClassifyRelief(f, ReliefOptions{});
   ExpectNoRelief(r, f);
   EXPECT_EQ(r.delta0_mm, 0.0);
@@ -195,7 +188,7 @@ TEST(Relief, FlatCanvasHasNoBoxes) {
 }
 
 TEST(Relief, ConcaveCanvasHasNoBoxes) {
-  HeightField f = MakeField(32, 32, 0.1, -0.5f);
+  HeightField f = test::MakeFlatField(32, 32, 0.1, -0.5f);
   f.height_mm(10, 10) = -0.1f;
   const ReliefResult r = ClassifyRelief(f, ReliefOptions{});
   ExpectNoRelief(r, f);
@@ -206,11 +199,11 @@ TEST(Relief, ConcaveCanvasHasNoBoxes) {
 // Only texels with height take part: a tall texel marked kOutside or kUnfilled (its height is
 // inpainted for continuity, not measured) neither sets H nor becomes relief.
 TEST(Relief, TexelsWithoutHeightAreIgnored) {
-  HeightField all_out = MakeField(16, 16, 0.1, 3.0f);
+  HeightField all_out = test::MakeFlatField(16, 16, 0.1, 3.0f);
   for (auto& s : all_out.state.data) s = TexelState::kOutside;
   ExpectNoRelief(ClassifyRelief(all_out, Options(4)), all_out);
 
-  HeightField f = MakeField(16, 16, 0.1);
+  HeightField f = test::MakeFlatField(16, 16, 0.1);
   for (int y = 4; y < 8; ++y)
     for (int x = 4; x < 8; ++x) f.height_mm(x, y) = 1.0f;
   f.height_mm(13, 13) = 50.0f;
@@ -228,7 +221,7 @@ TEST(Relief, TexelsWithoutHeightAreIgnored) {
 // A lone spike below the minimum area is noise: removed, even when it is the highest point
 // (H and delta0 still come from it, as in the paper: thresholds before cleaning).
 TEST(Relief, SingleSpikeBelowMinAreaIsRemoved) {
-  HeightField f = MakeField(64, 64, 0.1);
+  HeightField f = test::MakeFlatField(64, 64, 0.1);
   f.height_mm(20, 30) = 5.0f;
   const ReliefOptions o = Options(8, 0.5);
   ReliefResult r = ClassifyRelief(f, o);
@@ -253,7 +246,7 @@ TEST(Relief, SingleSpikeBelowMinAreaIsRemoved) {
 // Area threshold on the boundary, and 8-connectivity: texels 0.5 mm apart (0.25 mm^2 each).
 // A component exactly at the minimum area is kept ("smaller than" removes).
 TEST(Relief, MinAreaBoundaryAndEightConnectivity) {
-  HeightField f = MakeField(20, 20, 0.5);
+  HeightField f = test::MakeFlatField(20, 20, 0.5);
   f.height_mm(2, 2) = 1.0f;  // diagonal pair: one 8-connected component of 0.5 mm^2
   f.height_mm(3, 3) = 1.0f;
   f.height_mm(10, 10) = 1.0f;  // two texels two apart: two components of 0.25 mm^2
@@ -274,7 +267,7 @@ TEST(Relief, MinAreaBoundaryAndEightConnectivity) {
 // The box's peak is taken among all texels of the cell with height, not only valid ones: here a
 // removed speck is higher than the kept blob sharing its cell.
 TEST(Relief, PeakIsTheCellMaximumAmongTexelsWithHeight) {
-  HeightField f = MakeField(16, 16, 0.25);
+  HeightField f = test::MakeFlatField(16, 16, 0.25);
   for (int y = 0; y < 4; ++y)
     for (int x = 0; x < 4; ++x) f.height_mm(x, y) = 1.0f + 0.01f * x;  // kept, peak (3, *)
   f.height_mm(6, 6) = 1.5f;  // speck (0.0625 mm^2), same 8x8 cell
@@ -288,7 +281,7 @@ TEST(Relief, PeakIsTheCellMaximumAmongTexelsWithHeight) {
   EXPECT_EQ(r.boxes[0].u_max, 6);
   EXPECT_EQ(r.boxes[0].v_max, 6);
   // Ties: the first texel in row-major order.
-  HeightField g = MakeField(8, 8, 0.25);
+  HeightField g = test::MakeFlatField(8, 8, 0.25);
   for (int y = 2; y < 6; ++y)
     for (int x = 2; x < 6; ++x) g.height_mm(x, y) = 1.0f;
   const ReliefResult t = ClassifyRelief(g, o);
@@ -302,7 +295,7 @@ TEST(Relief, PeakIsTheCellMaximumAmongTexelsWithHeight) {
 // Random Gaussian blobs, noise specks and holes on a non-square grid whose size is not a
 // multiple of the cell: everything checked against the brute-force answer.
 HeightField RandomPainting(int w, int h, double pitch, uint32_t seed) {
-  HeightField f = MakeField(w, h, pitch);
+  HeightField f = test::MakeFlatField(w, h, pitch);
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> ux(0, w), uy(0, h), amp(0.2, 2.5), rad(1.0, 6.0);
   std::normal_distribution<float> noise(0.0f, 0.02f);
@@ -371,7 +364,7 @@ TEST(Relief, CellLargerThanGridIsOneBox) {
 }
 
 TEST(Relief, EdgeCellsAreSmaller) {
-  HeightField f = MakeField(50, 37, 0.1);
+  HeightField f = test::MakeFlatField(50, 37, 0.1);
   f.height_mm(49, 36) = 1.0f;  // bottom-right corner texel, in a 2 x 5 cell
   const ReliefOptions o = Options(16, 0.0);
   const ReliefResult r = ClassifyRelief(f, o);
@@ -385,7 +378,7 @@ TEST(Relief, EdgeCellsAreSmaller) {
 
 TEST(Relief, OneByNAndNByOne) {
   for (const auto& [w, h] : {std::pair{1, 1}, std::pair{1, 97}, std::pair{97, 1}}) {
-    HeightField f = MakeField(w, h, 0.5);
+    HeightField f = test::MakeFlatField(w, h, 0.5);
     for (int i = 0; i < w * h; ++i) f.height_mm.data[i] = (i % 7 < 3) ? 1.0f + 0.1f * i : 0.0f;
     for (int n : {1, 4, 200}) {
       const ReliefOptions o = Options(n, 0.5);
@@ -397,7 +390,7 @@ TEST(Relief, OneByNAndNByOne) {
 
 // Hostile magnitudes: 1e6 mm heights and a 1e-4 mm pitch (texel area 1e-8 mm^2).
 TEST(Relief, HugeHeightsAndTinyPitchStayFinite) {
-  HeightField f = MakeField(32, 32, 1e-4);
+  HeightField f = test::MakeFlatField(32, 32, 1e-4);
   for (int y = 8; y < 16; ++y)
     for (int x = 8; x < 16; ++x) f.height_mm(x, y) = 1e6f;
   f.height_mm(30, 30) = std::numeric_limits<float>::max();
@@ -414,7 +407,7 @@ TEST(Relief, HugeHeightsAndTinyPitchStayFinite) {
 // Mv is strictly above delta0: a texel exactly on the bump plane is not relief (exact in float
 // and double: 0.25 x 10).
 TEST(Relief, TexelExactlyAtDelta0IsNotRelief) {
-  HeightField f = MakeField(8, 8, 0.5);
+  HeightField f = test::MakeFlatField(8, 8, 0.5);
   f.height_mm(1, 1) = 10.0f;
   f.height_mm(6, 6) = 2.5f;
   const ReliefResult r = ClassifyRelief(f, Options(4, 0.0, 0.25));
@@ -425,7 +418,7 @@ TEST(Relief, TexelExactlyAtDelta0IsNotRelief) {
 
 // The noise margin lowers the classification threshold, not the reported bump plane.
 TEST(Relief, NoiseMarginLowersTheThresholdOnly) {
-  HeightField f = MakeField(16, 16, 0.25);
+  HeightField f = test::MakeFlatField(16, 16, 0.25);
   f.height_mm(2, 2) = 10.0f;    // H; delta0 = 3
   f.height_mm(10, 10) = 2.99f;  // just below delta0
   ReliefResult r = ClassifyRelief(f, Options(4, 0.0, 0.3, 0.0));
@@ -444,7 +437,7 @@ TEST(Relief, NoiseMarginLowersTheThresholdOnly) {
 }
 
 TEST(Relief, CoverGrowsBoxesByOneTexelAcrossCellBorders) {
-  HeightField f = MakeField(16, 16, 0.25);
+  HeightField f = test::MakeFlatField(16, 16, 0.25);
   f.height_mm(3, 5) = 1.0f;  // last column of cell (0, 1) with 4x4 cells: only that cell is boxed
   ReliefOptions o = Options(4);
   ReliefResult r = ClassifyRelief(f, o);
@@ -459,7 +452,7 @@ TEST(Relief, CoverGrowsBoxesByOneTexelAcrossCellBorders) {
 }
 
 TEST(Relief, FlatCanvasBelowTheReliefFloorHasNoBoxes) {
-  HeightField f = MakeField(16, 16, 0.25);
+  HeightField f = test::MakeFlatField(16, 16, 0.25);
   f.height_mm(5, 5) = 0.015f;  // rounding dust, below the default 0.02 mm floor
   ReliefResult r = ClassifyRelief(f, ReliefOptions{});
   EXPECT_TRUE(r.boxes.empty());

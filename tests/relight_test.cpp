@@ -12,20 +12,13 @@
 #include <vector>
 
 #include "digitize/normals.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
 
 // Radiance is a product of float factors (BRDF, cosine, irradiance): a few float ulps relative.
 constexpr double kRelTol = 1e-5;
-
-HeightField FlatCanvas(int w, int h, double pitch_mm, float height_mm = 0.0f) {
-  HeightField f;
-  f.pitch_mm = pitch_mm;
-  f.height_mm = Grid<float>(w, h, height_mm);
-  f.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  return f;
-}
 
 ReflectanceMaps Uniform(int w, int h, const LafortuneParams& p) {
   ReflectanceMaps m = ReflectanceMaps::Zeros(w, h);
@@ -81,7 +74,7 @@ HeightFieldTracer Tracer(const HeightField& f) { return HeightFieldTracer::Build
 // ---------------------------------------------------------------------------------------------
 
 TEST(RenderRelit, FlatLambertianUnderADirectionalLight) {
-  const HeightField canvas = FlatCanvas(40, 30, 0.5, 0.25f);
+  const HeightField canvas = test::MakeFlatField(40, 30, 0.5, 0.25f);
   const HeightFieldTracer tracer = Tracer(canvas);
   const Vec3f rho(0.2f / std::numbers::pi_v<float>, 0.5f / std::numbers::pi_v<float>, 0.05f);
   const Vec3f E(2.0f, 1.5f, 0.7f);
@@ -103,7 +96,7 @@ TEST(RenderRelit, FlatLambertianUnderADirectionalLight) {
 TEST(RenderRelit, MirrorLobeSeenFromAbove) {
   // v = +Z (local), l at elevation e: mirror lobe base = vz lz = sin(e), so
   // f = rho_d + rho_s sin(e)^k.
-  const HeightField canvas = FlatCanvas(12, 10, 1.0);
+  const HeightField canvas = test::MakeFlatField(12, 10, 1.0);
   const HeightFieldTracer tracer = Tracer(canvas);
   LafortuneParams p;
   p.rho_d = Vec3f(0.1f, 0.2f, 0.3f);
@@ -122,7 +115,7 @@ TEST(RenderRelit, MirrorLobeSeenFromAbove) {
 TEST(RenderRelit, PointLightFallsOffAsInverseSquareAndCosine) {
   // E = I / d^2 and cos = Z_light / d at a texel centre on the plane Z = 0:
   // radiance = rho_d I Z / d^3.
-  const HeightField canvas = FlatCanvas(50, 40, 0.4);
+  const HeightField canvas = test::MakeFlatField(50, 40, 0.4);
   const HeightFieldTracer tracer = Tracer(canvas);
   const Vec3f rho(0.3f, 0.2f, 0.1f);
   Light light;
@@ -145,7 +138,7 @@ TEST(RenderRelit, PointLightFallsOffAsInverseSquareAndCosine) {
 TEST(RenderRelit, PinholeCameraSeesWhereItsRaysLand) {
   // A pinhole 200 mm above the canvas centre looking down, with a point light: pixel (u, v) sees
   // the plane point X = Xc + (u - cx) Zc / fx, Y = Yc - (v - cy) Zc / fy.
-  const HeightField canvas = FlatCanvas(100, 80, 0.25);
+  const HeightField canvas = test::MakeFlatField(100, 80, 0.25);
   const HeightFieldTracer tracer = Tracer(canvas);
   Camera cam;
   cam.model = CameraModel::kPinhole;
@@ -183,7 +176,7 @@ TEST(RenderRelit, TiltedPlaneFollowsItsNormal) {
   // Plane Z = a X + b Y: normals from ComputeNormals are the plane's; Lambertian radiance is
   // rho E n.l at every texel, seen from above (the camera ray meets the plane at the texel centre).
   constexpr double a = 0.3, b = -0.15;
-  HeightField canvas = FlatCanvas(30, 20, 0.5);
+  HeightField canvas = test::MakeFlatField(30, 20, 0.5);
   for (int y = 0; y < 20; ++y)
     for (int x = 0; x < 30; ++x) {
       const Eigen::Vector2d c = canvas.TexelCentreMm(x, y);
@@ -216,7 +209,7 @@ TEST(RenderRelit, RidgeShadowMatchesTheAnalyticStrip) {
   constexpr int kW = 80, kH = 16;
   constexpr double kPitch = 0.1;
   constexpr float kRidge = 1.0f;
-  HeightField canvas = FlatCanvas(kW, kH, kPitch);
+  HeightField canvas = test::MakeFlatField(kW, kH, kPitch);
   for (int y = 0; y < kH; ++y)
     for (int x = 20; x <= 24; ++x) canvas.height_mm(x, y) = kRidge;
   const HeightFieldTracer tracer = Tracer(canvas);
@@ -249,7 +242,7 @@ TEST(RenderRelit, RidgeShadowMatchesTheAnalyticStrip) {
 }
 
 TEST(RenderRelit, MissesAndOutsideTexelsAreMaskedBlack) {
-  HeightField canvas = FlatCanvas(20, 16, 0.5);
+  HeightField canvas = test::MakeFlatField(20, 16, 0.5);
   canvas.state(3, 4) = TexelState::kOutside;
   const HeightFieldTracer tracer = Tracer(canvas);
   constexpr int kMargin = 5;  // pixels beyond the canvas on every side
@@ -271,7 +264,7 @@ TEST(RenderRelit, MissesAndOutsideTexelsAreMaskedBlack) {
 }
 
 TEST(RenderRelit, ZeroMapsAndBacklightRenderBlackNotNaN) {
-  const HeightField canvas = FlatCanvas(8, 8, 1.0);
+  const HeightField canvas = test::MakeFlatField(8, 8, 1.0);
   const HeightFieldTracer tracer = Tracer(canvas);
   // Light below the canvas plane: n.l < 0 everywhere.
   const RelitImage below =
@@ -290,7 +283,7 @@ TEST(RenderRelit, ZeroMapsAndBacklightRenderBlackNotNaN) {
 TEST(RenderRelit, CanvasFromScanMovesCameraAndLightTogether) {
   // The same scene expressed in a scan frame rotated and shifted against the canvas frame renders
   // the same image.
-  const HeightField canvas = FlatCanvas(24, 18, 0.5);
+  const HeightField canvas = test::MakeFlatField(24, 18, 0.5);
   const HeightFieldTracer tracer = Tracer(canvas);
   const ReflectanceMaps maps = Uniform(24, 18, Lambertian(Vec3f(0.2f, 0.3f, 0.4f)));
   Light light;
@@ -317,7 +310,7 @@ TEST(RenderRelit, CanvasFromScanMovesCameraAndLightTogether) {
 }
 
 TEST(RenderRelit, SizeMismatchIsAnInvariantError) {
-  const HeightField canvas = FlatCanvas(8, 8, 1.0);
+  const HeightField canvas = test::MakeFlatField(8, 8, 1.0);
   const HeightFieldTracer tracer = Tracer(canvas);
   const Camera cam = OrthoAbove(canvas);
   const Light light = Directional(0, 1, Vec3f::Ones());
@@ -327,7 +320,7 @@ TEST(RenderRelit, SizeMismatchIsAnInvariantError) {
   EXPECT_THROW(RenderRelit(tracer, canvas, Up(8, 8), ReflectanceMaps::Zeros(8, 9), RigidTransform{},
                            cam, light),
                InvariantError);
-  const HeightField other = FlatCanvas(9, 8, 1.0);
+  const HeightField other = test::MakeFlatField(9, 8, 1.0);
   EXPECT_THROW(RenderRelit(tracer, other, Up(9, 8), ReflectanceMaps::Zeros(9, 8), RigidTransform{},
                            cam, light),
                InvariantError);

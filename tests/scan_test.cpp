@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "digitize/scan_io.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -264,8 +265,7 @@ TEST(ScanTiming, DISABLED_Size4096) {
     sanitize_cpu_ms = std::min(sanitize_cpu_ms, cpu_ms(c0));
   }
 
-  const auto path = std::filesystem::temp_directory_path() /
-                    ("digitize_timing_" + std::to_string(::getpid()) + ".exr");
+  const std::filesystem::path path = test::ScratchPath("digitize_timing").string() + ".exr";
   auto t0 = Clock::now();
   ASSERT_TRUE(WriteScanExr(path, exposures[0]).ok());
   const double write_ms = ms(t0);

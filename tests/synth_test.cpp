@@ -10,12 +10,11 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <numeric>
 #include <random>
 #include <set>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
 #include "digitize/scan_io.h"
@@ -23,6 +22,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
 #include "digitize_synth/synth_io.h"
+#include "test_support.h"
 
 namespace digitize::synth {
 namespace {
@@ -817,15 +817,9 @@ TEST(MeasureAccuracy, EmptyEstimateGivesNaNNotZero) {
 // ---------------------------------------------------------------------------------------------
 // Files
 
-class SynthIo : public ::testing::Test {
+class SynthIo : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("digitize_synth_test_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
+  SynthIo() : ScratchDirTest("digitize_synth_test", /*create=*/false) {}
 };
 
 TEST_F(SynthIo, WritesScanAndGroundTruthThatReadBack) {

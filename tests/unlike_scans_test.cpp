@@ -17,6 +17,7 @@
 #include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -266,10 +267,7 @@ std::string RunCli(const std::string& args, int* rc) {
 }
 
 TEST(UnlikeScansCli, SynthFlagsAndThePreprocessWarning) {
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("unlike_scans_cli_" + std::to_string(getpid()));
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
+  const std::filesystem::path dir = test::FreshScratchDir("unlike_scans_cli");
   const std::string scene =
       " --width-mm 300 --height-mm 220 --model pinhole --scan-size 700 560 --distance-mm 700"
       " --tilt-deg 6 --tilt-axis-deg 45 --roll-deg 5 --offset-mm 20 -10"

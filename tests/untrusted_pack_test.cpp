@@ -19,6 +19,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "pack_forge.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -51,16 +52,9 @@ Output RunProgram(const std::string& program, const std::string& args, const fs:
 
 std::string Quote(const fs::path& p) { return "'" + p.string() + "'"; }
 
-class UntrustedPackTest : public ::testing::Test {
+class UntrustedPackTest : public test::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("digitize_untrusted_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  UntrustedPackTest() : ScratchDirTest("digitize_untrusted") {}
 
   static Pack SmallPack() {
     synth::PaintingOptions po;
@@ -70,7 +64,6 @@ class UntrustedPackTest : public ::testing::Test {
     po.impasto_count = 2;
     return synth::MakeTruthPack(synth::MakePainting(po));
   }
-  fs::path dir_;
 };
 
 bool HasControlBytes(const std::string& text) {

@@ -10,6 +10,8 @@
 #include <sstream>
 #include <string>
 
+#include "test_support.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -19,20 +21,14 @@ struct Output {
   std::string text;  // stdout + stderr
 };
 
-class ViewerCliTest : public ::testing::Test {
+class ViewerCliTest : public digitize::test::ScratchDirTest {
  protected:
+  ViewerCliTest() : ScratchDirTest("digitize_viewer_cli") {}
   void SetUp() override {
 #ifndef DIGITIZE_VIEWER
     GTEST_SKIP() << "digitize-viewer is not built here (GLFW, imgui or stb missing)";
 #endif
-    dir_ = fs::temp_directory_path() /
-           ("digitize_viewer_cli_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!dir_.empty()) fs::remove_all(dir_);
+    ScratchDirTest::SetUp();
   }
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
 
@@ -63,7 +59,6 @@ class ViewerCliTest : public ::testing::Test {
       n += e.path().filename() != "viewer.log";
     return n;
   }
-  fs::path dir_;
 };
 
 TEST_F(ViewerCliTest, NoPackAndNoSyntheticIsAnErrorWithUsage) {

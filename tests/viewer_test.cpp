@@ -26,6 +26,7 @@
 #include "digitize_viewer/scene_setup.h"
 #include "digitize_viewer/view.h"
 #include "pack_forge.h"
+#include "test_support.h"
 
 namespace digitize::viewer {
 namespace {
@@ -464,8 +465,7 @@ TEST(ViewerTest, ShadowsMatchReferenceWithShadows) {
 }
 
 std::filesystem::path TempDir() {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("digitize_viewer_test_" + std::to_string(::getpid()));
+  const auto dir = test::ScratchPath("digitize_viewer_test");
   std::filesystem::create_directories(dir);
   return dir;
 }

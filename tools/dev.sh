@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # One entry point for people and CI. Installs what is missing (Debian 12 packages), builds, and runs.
 #   tools/dev.sh demo    build, then run the whole pipeline on a synthetic painting (digitize demo)
-#   tools/dev.sh test    build, run the test suite, then again under ASan+UBSan, then the fuzzers
-#                        for DIGITIZE_FUZZ_SECONDS each (default 30; 0: replay their corpus only)
+#   tools/dev.sh test    check the formatting (clang-format-14, .clang-format), build, run the test
+#                        suite, then again under ASan+UBSan, then the fuzzers for
+#                        DIGITIZE_FUZZ_SECONDS each (default 30; 0: replay their corpus only)
+#   tools/dev.sh format-check  only the formatting check (lists every file that drifts)
+#   tools/dev.sh format  apply .clang-format to every C++ source
 #   tools/dev.sh fuzz [SECONDS]  build the libFuzzer targets (clang, build-fuzz/) and run each for
 #                        SECONDS (default DIGITIZE_FUZZ_SECONDS, else 60) from its seed corpus
 #   tools/dev.sh build   install + build only (Release, in build/)
@@ -19,6 +22,7 @@ packages=(
   libembree-dev libcgal-dev libopenmesh-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev  # the fuzz targets: clang's libFuzzer + sanitizer runtimes
+  clang-format-14           # the formatting check of tools/dev.sh test
   # viewer: GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
   libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
 )
@@ -47,6 +51,33 @@ configure() {  # configure DIR [cmake args...]: each folder always gets the same
 run_tests() {  # run_tests DIR LABEL
   echo "== tests ($2)"
   ctest --test-dir "$1" --output-on-failure --no-tests=error -j "$jobs" --timeout 900
+}
+
+# Every C++ source and header of the project (tracked files in a git checkout, else the source
+# folders), for the formatting check.
+cxx_sources() {
+  if git -C "$root" rev-parse --is-inside-work-tree > /dev/null 2>&1; then
+    git -C "$root" ls-files --cached --others --exclude-standard -- '*.cpp' '*.h' |
+      while IFS= read -r f; do [ -f "$f" ] && echo "$f"; done
+  else
+    find libdigitize tools viewer data_synthetic tests bench \( -name '*.cpp' -o -name '*.h' \) | sort
+  fi
+}
+
+# The sources as .clang-format says (Debian 12's clang-format-14, so every machine agrees): lists
+# the files that drift and fails; `tools/dev.sh format` rewrites them.
+check_format() {
+  echo "== format (clang-format-14 --dry-run --Werror)"
+  local bad=() f
+  while IFS= read -r f; do
+    clang-format-14 --dry-run --Werror "$f" > /dev/null 2>&1 || bad+=("$f")
+  done < <(cxx_sources)
+  if [ ${#bad[@]} -gt 0 ]; then
+    printf '  %s\n' "${bad[@]}"
+    echo "== format: ${#bad[@]} file(s) differ from .clang-format (see: clang-format-14 --dry-run" \
+         "FILE; fix all: tools/dev.sh format)"
+    return 1
+  fi
 }
 
 # The libFuzzer targets (tests/fuzz/): clang, ASan+UBSan, only the library sources they need.
@@ -110,6 +141,7 @@ case "$cmd" in
     ;;
   test)
     install_packages
+    check_format
     configure build -DCMAKE_BUILD_TYPE=Release
     cmake --build build -j "$jobs"
     run_tests build "Release"
@@ -120,6 +152,14 @@ case "$cmd" in
       DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan"
     build_fuzzers
     run_fuzzers "${DIGITIZE_FUZZ_SECONDS:-30}"
+    ;;
+  format-check)
+    install_packages
+    check_format
+    ;;
+  format)
+    install_packages
+    cxx_sources | xargs -d '\n' clang-format-14 -i
     ;;
   fuzz)
     install_packages
@@ -134,7 +174,7 @@ case "$cmd" in
     bash bench/run.sh "$@"
     ;;
   *)
-    echo "usage: tools/dev.sh demo|test|build|bench|fuzz [SECONDS]" >&2
+    echo "usage: tools/dev.sh demo|test|build|bench|fuzz [SECONDS]|format-check|format" >&2
     exit 2
     ;;
 esac

@@ -1,0 +1,61 @@
+# The files of each library layer (docs/architecture.md), relative to libdigitize/include/digitize
+# (headers) and libdigitize/src (sources). Adding a file to a layer: one line here. Read by
+# libdigitize/CMakeLists.txt (one target per layer) and tests/fuzz/CMakeLists.txt (which compiles
+# the parser layers again, instrumented).
+
+set(DIGITIZE_CORE_HEADERS core.h height_field.h)
+set(DIGITIZE_CORE_SOURCES)
+
+set(DIGITIZE_IO_HEADERS image_io.h scan_io.h output_dir.h)
+set(DIGITIZE_IO_SOURCES
+  image_io.cpp    # OpenImageIO
+  output_dir.cpp
+  scan_io.cpp     # OpenMesh (PLY)
+)
+
+set(DIGITIZE_CANVAS_HEADERS scan.h canvas.h resample.h)
+set(DIGITIZE_CANVAS_SOURCES
+  scan.cpp
+  canvas.cpp      # OpenCV calib3d (homography, minimum-area rectangle)
+  resample.cpp
+  mask_ops.cpp    # OpenCV morphology shared by canvas.cpp and resample.cpp
+)
+
+set(DIGITIZE_RELIEF_HEADERS relief.h normals.h)
+set(DIGITIZE_RELIEF_SOURCES
+  relief.cpp      # OpenCV connected components
+  normals.cpp
+)
+
+set(DIGITIZE_PREPROCESS_HEADERS preprocess.h)
+set(DIGITIZE_PREPROCESS_SOURCES
+  preprocess.cpp
+)
+
+set(DIGITIZE_PHOTOS_HEADERS photo_set.h)
+set(DIGITIZE_PHOTOS_SOURCES
+  photo_set.cpp
+)
+
+set(DIGITIZE_BRDF_HEADERS lafortune.h brdf_fit.h tangent_frame.h reflectance_maps.h)
+set(DIGITIZE_BRDF_SOURCES
+  lafortune.cpp
+  reflectance_maps.cpp
+  brdf_fit.cpp    # Ceres
+)
+
+set(DIGITIZE_SAMPLES_HEADERS height_field_tracer.h relight.h reflectance_samples.h reflectance_fit.h)
+set(DIGITIZE_SAMPLES_SOURCES
+  height_field_tracer.cpp  # Embree
+  relight.cpp
+  reflectance_samples.cpp
+  reflectance_fit.cpp
+)
+
+set(DIGITIZE_PACK_HEADERS pack.h)
+set(DIGITIZE_PACK_SOURCES
+  pack.cpp        # OpenImageIO (multi-part OpenEXR, SHA-1)
+)
+
+set(DIGITIZE_PIPELINE_HEADERS)
+set(DIGITIZE_PIPELINE_SOURCES)
