@@ -26,6 +26,7 @@
 // depend on thread scheduling.
 #include "digitize_synth/painting.h"
 
+#include <ceres/jet.h>
 #include <tbb/blocked_range2d.h>
 #include <tbb/parallel_for.h>
 
@@ -34,9 +35,6 @@
 #include <cmath>
 #include <numbers>
 #include <random>
-#include <sstream>
-
-#include <ceres/jet.h>
 
 namespace digitize::synth {
 namespace {
@@ -679,44 +677,40 @@ Model BuildModel(const PaintingOptions& o, double w, double h, double pitch) {
 
 Status PaintingOptions::Validate() const {
   auto fail = [](const std::string& what) { return Status(Error{"painting options: " + what}); };
-  auto str = [](double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-  };
   if (!(std::isfinite(width_mm) && width_mm > 0 && width_mm <= 1e5))
-    return fail("width_mm must be in (0, 100000], got " + str(width_mm));
+    return fail("width_mm must be in (0, 100000], got " + FormatNumber(width_mm));
   if (!(std::isfinite(height_mm) && height_mm > 0 && height_mm <= 1e5))
-    return fail("height_mm must be in (0, 100000], got " + str(height_mm));
+    return fail("height_mm must be in (0, 100000], got " + FormatNumber(height_mm));
   if (resolution_px < 64 || resolution_px > 8192)
     return fail("resolution_px must be in [64, 8192], got " + std::to_string(resolution_px));
   if (std::max(width_mm, height_mm) / std::min(width_mm, height_mm) > resolution_px)
-    return fail("canvas aspect ratio " + str(std::max(width_mm, height_mm) /
-                                            std::min(width_mm, height_mm)) +
+    return fail("canvas aspect ratio " +
+                FormatNumber(std::max(width_mm, height_mm) / std::min(width_mm, height_mm)) +
                 " leaves less than one texel on the short side at resolution_px " +
                 std::to_string(resolution_px));
   if (!(std::isfinite(weave_period_mm) && weave_period_mm > 0))
-    return fail("weave_period_mm must be > 0, got " + str(weave_period_mm));
+    return fail("weave_period_mm must be > 0, got " + FormatNumber(weave_period_mm));
   if (!(std::isfinite(weave_amplitude_mm) && weave_amplitude_mm >= 0 && weave_amplitude_mm <= 10))
-    return fail("weave_amplitude_mm must be in [0, 10], got " + str(weave_amplitude_mm));
+    return fail("weave_amplitude_mm must be in [0, 10], got " + FormatNumber(weave_amplitude_mm));
   if (stroke_count < 0 || stroke_count > 100000)
     return fail("stroke_count must be in [0, 100000], got " + std::to_string(stroke_count));
   if (!(std::isfinite(stroke_min_mm) && stroke_min_mm >= 0))
-    return fail("stroke_min_mm must be >= 0, got " + str(stroke_min_mm));
+    return fail("stroke_min_mm must be >= 0, got " + FormatNumber(stroke_min_mm));
   if (!(std::isfinite(stroke_max_mm) && stroke_max_mm >= stroke_min_mm && stroke_max_mm <= 100))
-    return fail("stroke_max_mm must be in [stroke_min_mm, 100], got " + str(stroke_max_mm));
+    return fail("stroke_max_mm must be in [stroke_min_mm, 100], got " +
+                FormatNumber(stroke_max_mm));
   if (impasto_count < 0 || impasto_count > 100000)
     return fail("impasto_count must be in [0, 100000], got " + std::to_string(impasto_count));
   if (!(std::isfinite(impasto_max_mm) && impasto_max_mm >= 0 && impasto_max_mm <= 100))
-    return fail("impasto_max_mm must be in [0, 100], got " + str(impasto_max_mm));
+    return fail("impasto_max_mm must be in [0, 100], got " + FormatNumber(impasto_max_mm));
   if (!(std::isfinite(crack_depth_mm) && crack_depth_mm >= 0 && crack_depth_mm <= 100))
-    return fail("crack_depth_mm must be in [0, 100], got " + str(crack_depth_mm));
+    return fail("crack_depth_mm must be in [0, 100], got " + FormatNumber(crack_depth_mm));
   if (!(std::isfinite(crack_width_mm) && crack_width_mm > 0 && crack_width_mm <= 100))
-    return fail("crack_width_mm must be in (0, 100], got " + str(crack_width_mm));
+    return fail("crack_width_mm must be in (0, 100], got " + FormatNumber(crack_width_mm));
   if (region_count < 1 || region_count > 256)
     return fail("region_count must be in [1, 256], got " + std::to_string(region_count));
   if (!(std::isfinite(bow_mm) && std::abs(bow_mm) <= 100))
-    return fail("bow_mm must be in [-100, 100], got " + str(bow_mm));
+    return fail("bow_mm must be in [-100, 100], got " + FormatNumber(bow_mm));
   return Status::Ok();
 }
 

@@ -65,8 +65,6 @@ SplitMixEngine RowStream(uint64_t seed, int image, int row) {
   return SplitMixEngine{s};
 }
 
-std::string Num(double v) { return FormatNumber(v); }
-
 // ---------------------------------------------------------------------------------------------
 // Encodings. The same sRGB EOTF in double as the reader's tables (photo_set.cpp), so the linear
 // value of a code here is bit for bit the one digitize::LoadPhoto returns for it.
@@ -161,7 +159,7 @@ View MakeView(const Painting& painting, const PhotoSimOptions& o, const Vec3d& e
   }
   const double w = std::ceil(2 * half_u), h = std::ceil(2 * half_v);
   DIGITIZE_CHECK(w <= kMaxImageSide && h <= kMaxImageSide,
-                 "SimulatePhotoSet: images of " + Num(w) + " x " + Num(h) +
+                 "SimulatePhotoSet: images of " + FormatNumber(w) + " x " + FormatNumber(h) +
                      " px; lower pixels_per_texel or the painting's resolution");
   cam.width = std::max(1, static_cast<int>(w));
   cam.height = std::max(1, static_cast<int>(h));
@@ -435,35 +433,38 @@ Status PhotoSimOptions::Validate() const {
   if (cameras < 1 || cameras > 64)
     return fail("cameras must be in [1, 64], got " + std::to_string(cameras));
   if (!in(camera_arc_deg, 0, 80))
-    return fail("camera_arc_deg must be in [0, 80], got " + Num(camera_arc_deg));
+    return fail("camera_arc_deg must be in [0, 80], got " + FormatNumber(camera_arc_deg));
   if (!(in(camera_distance_mm, 0, 1e5) && camera_distance_mm > 0))
-    return fail("camera_distance_mm must be in (0, 100000], got " + Num(camera_distance_mm));
+    return fail("camera_distance_mm must be in (0, 100000], got " +
+                FormatNumber(camera_distance_mm));
   if (!(in(pixels_per_texel, 0, 16) && pixels_per_texel > 0))
-    return fail("pixels_per_texel must be in (0, 16], got " + Num(pixels_per_texel));
-  if (!in(view_margin, 0, 2)) return fail("view_margin must be in [0, 2], got " + Num(view_margin));
+    return fail("pixels_per_texel must be in (0, 16], got " + FormatNumber(pixels_per_texel));
+  if (!in(view_margin, 0, 2))
+    return fail("view_margin must be in [0, 2], got " + FormatNumber(view_margin));
   if (lights < 1 || lights > 4096)
     return fail("lights must be in [1, 4096], got " + std::to_string(lights));
   if (!(in(light_min_elevation_deg, 0, 90) && light_min_elevation_deg > 0))
-    return fail("light_min_elevation_deg must be in (0, 90], got " + Num(light_min_elevation_deg));
+    return fail("light_min_elevation_deg must be in (0, 90], got " +
+                FormatNumber(light_min_elevation_deg));
   if (!in(light_max_elevation_deg, light_min_elevation_deg, 90))
     return fail("light_max_elevation_deg must be in [light_min_elevation_deg, 90], got " +
-                Num(light_max_elevation_deg));
+                FormatNumber(light_max_elevation_deg));
   if (!(in(light_distance_mm, 0, 1e5) && light_distance_mm > 0))
-    return fail("light_distance_mm must be in (0, 100000], got " + Num(light_distance_mm));
+    return fail("light_distance_mm must be in (0, 100000], got " + FormatNumber(light_distance_mm));
   if (!(in(white_level, 0, 1e6) && white_level > 0))
-    return fail("white_level must be in (0, 1e6] (linear), got " + Num(white_level));
+    return fail("white_level must be in (0, 1e6] (linear), got " + FormatNumber(white_level));
   if (held_out_lights < 0 || held_out_lights > 4096)
     return fail("held_out_lights must be in [0, 4096], got " + std::to_string(held_out_lights));
   if (!in(held_out_camera_deg, 0, 80))
-    return fail("held_out_camera_deg must be in [0, 80], got " + Num(held_out_camera_deg));
+    return fail("held_out_camera_deg must be in [0, 80], got " + FormatNumber(held_out_camera_deg));
   if (!in(noise_sigma, 0, 1))
-    return fail("noise_sigma must be in [0, 1] (linear), got " + Num(noise_sigma));
+    return fail("noise_sigma must be in [0, 1] (linear), got " + FormatNumber(noise_sigma));
   if (encoding != PhotoEncoding::kSrgb8 && encoding != PhotoEncoding::kSrgb16 &&
       encoding != PhotoEncoding::kLinearExr)
     return fail("encoding must be srgb8, srgb16 or exr, got " +
                 std::to_string(static_cast<int>(encoding)));
   if (!in(frame_albedo, 0, 1))
-    return fail("frame_albedo must be in [0, 1], got " + Num(frame_albedo));
+    return fail("frame_albedo must be in [0, 1], got " + FormatNumber(frame_albedo));
   return Status::Ok();
 }
 

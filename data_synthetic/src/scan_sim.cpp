@@ -11,7 +11,6 @@
 #include <cmath>
 #include <numbers>
 #include <random>
-#include <sstream>
 #include <string>
 
 namespace digitize::synth {
@@ -35,12 +34,6 @@ std::mt19937_64 RowStream(uint64_t seed, int exposure, uint64_t purpose, int row
   s = SplitMix64(s ^ purpose * 0xC2B2AE3D27D4EB4Full);
   s = SplitMix64(s ^ (static_cast<uint64_t>(row) + 1) * 0x165667B19E3779F9ull);
   return std::mt19937_64(s);
-}
-
-std::string Num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
 }
 
 // The scanner: where pixel (i, j)'s ray starts and where it goes, in the scan frame.
@@ -108,7 +101,7 @@ Camera MakeCamera(const Painting& painting, const FrameOptions& frame, const Sca
       half_y = std::max(half_y, std::abs(p.y() - centre.y()));
     } else {
       DIGITIZE_CHECK(p.z() > 1e-6, "SimulateScan: the scene is behind the pinhole (corner at Z = " +
-                                       Num(p.z()) + " mm); increase distance_mm");
+                                       FormatNumber(p.z()) + " mm); increase distance_mm");
       half_x = std::max(half_x, std::abs(p.x() / p.z() - centre.x() / centre.z()));
       half_y = std::max(half_y, std::abs(p.y() / p.z() - centre.y() / centre.z()));
     }
@@ -175,20 +168,21 @@ Status ScanSimOptions::Validate() const {
     return fail("width_px x height_px must be at most 2^28 samples, got " +
                 std::to_string(width_px) + " x " + std::to_string(height_px));
   if (!(std::isfinite(field_margin) && field_margin > -0.95 && field_margin <= 10))
-    return fail("field_margin must be in (-0.95, 10], got " + Num(field_margin));
+    return fail("field_margin must be in (-0.95, 10], got " + FormatNumber(field_margin));
   if (!(std::isfinite(tilt_deg) && std::abs(tilt_deg) <= 80))
-    return fail("tilt_deg must be in [-80, 80], got " + Num(tilt_deg));
+    return fail("tilt_deg must be in [-80, 80], got " + FormatNumber(tilt_deg));
   if (!std::isfinite(tilt_axis_deg)) return fail("tilt_axis_deg must be finite");
   if (!std::isfinite(roll_deg)) return fail("roll_deg must be finite");
   if (!offset_mm.allFinite()) return fail("offset_mm must be finite");
   if (!(std::isfinite(distance_mm) && distance_mm > 0 && distance_mm <= 1e5))
-    return fail("distance_mm must be in (0, 100000], got " + Num(distance_mm));
+    return fail("distance_mm must be in (0, 100000], got " + FormatNumber(distance_mm));
   if (!(distance_mm + offset_mm.z() > 0))
     return fail("distance_mm + offset_mm.z must be > 0 (canvas in front of the scanner), got " +
-                Num(distance_mm + offset_mm.z()));
+                FormatNumber(distance_mm + offset_mm.z()));
   if (!(std::isfinite(noise_mm) && noise_mm >= 0 && noise_mm <= 1000))
-    return fail("noise_mm must be in [0, 1000], got " + Num(noise_mm));
-  if (!(dropout >= 0 && dropout <= 1)) return fail("dropout must be in [0, 1], got " + Num(dropout));
+    return fail("noise_mm must be in [0, 1000], got " + FormatNumber(noise_mm));
+  if (!(dropout >= 0 && dropout <= 1))
+    return fail("dropout must be in [0, 1], got " + FormatNumber(dropout));
   if (hole_blobs < 0 || hole_blobs > 100000)
     return fail("hole_blobs must be in [0, 100000], got " + std::to_string(hole_blobs));
   if (border_hole_blobs < 0 || border_hole_blobs > 100000)
@@ -196,9 +190,10 @@ Status ScanSimOptions::Validate() const {
                 std::to_string(border_hole_blobs));
   if (!(std::isfinite(hole_blob_radius_px) && hole_blob_radius_px >= 0 &&
         hole_blob_radius_px <= 1e5))
-    return fail("hole_blob_radius_px must be in [0, 100000], got " + Num(hole_blob_radius_px));
+    return fail("hole_blob_radius_px must be in [0, 100000], got " +
+                FormatNumber(hole_blob_radius_px));
   if (!(outliers >= 0 && outliers <= 1))
-    return fail("outliers must be in [0, 1], got " + Num(outliers));
+    return fail("outliers must be in [0, 1], got " + FormatNumber(outliers));
   if (exposures < 1 || exposures > 64)
     return fail("exposures must be in [1, 64], got " + std::to_string(exposures));
   return Status::Ok();

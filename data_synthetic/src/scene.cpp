@@ -8,7 +8,6 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -42,47 +41,42 @@ void ErrorCallback(void* user, RTCError code, const char* message) {
           (message ? message : "(no message)");
 }
 
-std::string Num(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
-
 }  // namespace
 
 Status FrameOptions::Validate() const {
   auto fail = [](const std::string& what) { return Status(Error{"frame options: " + what}); };
   if (!(std::isfinite(raise_mm) && raise_mm > 0 && raise_mm <= 1000))
-    return fail("raise_mm must be in (0, 1000], got " + Num(raise_mm));
+    return fail("raise_mm must be in (0, 1000], got " + FormatNumber(raise_mm));
   if (!(std::isfinite(width_mm) && width_mm > 0 && width_mm <= 1000))
-    return fail("width_mm must be in (0, 1000], got " + Num(width_mm));
+    return fail("width_mm must be in (0, 1000], got " + FormatNumber(width_mm));
   if (!(std::isfinite(wall_depth_mm) && wall_depth_mm > 0 && wall_depth_mm <= 10000))
-    return fail("wall_depth_mm must be in (0, 10000], got " + Num(wall_depth_mm));
+    return fail("wall_depth_mm must be in (0, 10000], got " + FormatNumber(wall_depth_mm));
   const char* names[4] = {"left_mm", "right_mm", "bottom_mm", "top_mm"};
   const double sides[4] = {left_mm, right_mm, bottom_mm, top_mm};
   for (int k = 0; k < 4; ++k)
     if (!(std::isfinite(sides[k]) && sides[k] >= 0 && sides[k] <= 1000))
       return fail(std::string(names[k]) + " must be in [0, 1000] (0 = width_mm), got " +
-                  Num(sides[k]));
+                  FormatNumber(sides[k]));
   double narrowest = width_mm;
   for (int k = 0; k < 4; ++k) narrowest = std::min(narrowest, Width(k));
   if (!(std::isfinite(bevel_width_mm) && bevel_width_mm >= 0 && bevel_width_mm < narrowest))
-    return fail("bevel_width_mm must be in [0, the narrowest side's width " + Num(narrowest) +
-                "), got " + Num(bevel_width_mm));
+    return fail("bevel_width_mm must be in [0, the narrowest side's width " +
+                FormatNumber(narrowest) + "), got " + FormatNumber(bevel_width_mm));
   if (!(std::isfinite(bevel_height_mm) && bevel_height_mm >= 0 && bevel_height_mm <= raise_mm))
-    return fail("bevel_height_mm must be in [0, raise_mm], got " + Num(bevel_height_mm));
+    return fail("bevel_height_mm must be in [0, raise_mm], got " + FormatNumber(bevel_height_mm));
   if (!(std::isfinite(lip_mm) && lip_mm >= 0 && lip_mm <= 1000))
-    return fail("lip_mm must be in [0, 1000], got " + Num(lip_mm));
+    return fail("lip_mm must be in [0, 1000], got " + FormatNumber(lip_mm));
   if (lip_mm > 0 && !(std::isfinite(lip_gap_mm) && lip_gap_mm > 0 && lip_gap_mm < raise_mm))
-    return fail("lip_gap_mm must be in (0, raise_mm), got " + Num(lip_gap_mm));
+    return fail("lip_gap_mm must be in (0, raise_mm), got " + FormatNumber(lip_gap_mm));
   return Status::Ok();
 }
 
 Status FrameOptions::ValidateFor(double canvas_width_mm, double canvas_height_mm) const {
   if (Status s = Validate(); !s.ok()) return s;
   if (enabled && !(2 * lip_mm < std::min(canvas_width_mm, canvas_height_mm)))
-    return Status(Error{"frame options: lip_mm " + Num(lip_mm) + " hides the whole " +
-                        Num(canvas_width_mm) + " x " + Num(canvas_height_mm) + " mm canvas"});
+    return Status(Error{"frame options: lip_mm " + FormatNumber(lip_mm) + " hides the whole " +
+                        FormatNumber(canvas_width_mm) + " x " + FormatNumber(canvas_height_mm) +
+                        " mm canvas"});
   return Status::Ok();
 }
 

@@ -3,14 +3,14 @@
 
 #include <algorithm>
 #include <array>
-#include <charconv>
 #include <cmath>
-#include <fstream>
 #include <limits>
-#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
+
+#include "digitize/image_io.h"
+#include "text_tokens.h"
 
 namespace digitize {
 namespace {
@@ -133,27 +133,10 @@ Vec3f EvaluateMeasuredLafortune(const MeasuredLafortune& brdf, const Vec3f& v, c
 
 namespace {
 
-// Splits on runs of spaces/tabs; '\r' counts as space so CRLF files read the same.
-std::vector<std::string_view> Tokens(std::string_view line) {
-  std::vector<std::string_view> out;
-  size_t i = 0;
-  const auto space = [](char ch) { return ch == ' ' || ch == '\t' || ch == '\r'; };
-  while (i < line.size()) {
-    while (i < line.size() && space(line[i])) ++i;
-    const size_t start = i;
-    while (i < line.size() && !space(line[i])) ++i;
-    if (i > start) out.push_back(line.substr(start, i - start));
-  }
-  return out;
-}
-
-// A finite decimal number, the whole token. from_chars would accept "nan" and "inf".
+// A finite decimal number, the whole token (ParseWholeNumber alone accepts "nan" and "inf").
 bool ParseNumber(std::string_view token, float* out) {
-  if (token.empty()) return false;
   float value = 0;
-  const auto [end, ec] = std::from_chars(token.data(), token.data() + token.size(), value);
-  if (ec != std::errc() || end != token.data() + token.size() || !std::isfinite(value))
-    return false;
+  if (!ParseWholeNumber(token, value) || !std::isfinite(value)) return false;
   *out = value;
   return true;
 }
@@ -205,7 +188,8 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
         pos, newline == std::string_view::npos ? std::string_view::npos : newline - pos);
     pos = newline == std::string_view::npos ? text.size() + 1 : newline + 1;
     ++line_number;
-    const std::vector<std::string_view> tokens = Tokens(line);
+    std::vector<std::string_view> tokens;
+    for (const TextToken& t : SplitTokens(line, kSpaceTabCr)) tokens.push_back(t.text);
     if (tokens.empty() || tokens[0].front() == '#') continue;
     if (tokens.size() != 5)
       return fail(
@@ -236,9 +220,7 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
       continue;
     }
     int lobe_index = -1;
-    const auto [end, ec] =
-        std::from_chars(tokens[1].data(), tokens[1].data() + tokens[1].size(), lobe_index);
-    if (ec != std::errc() || end != tokens[1].data() + tokens[1].size() || lobe_index < 0)
+    if (!ParseWholeNumber(tokens[1], lobe_index) || lobe_index < 0)
       return fail("second column must be 'diffuse' or a lobe index >= 0, got '" +
                   std::string(tokens[1]) + "'");
     if (static_cast<size_t>(lobe_index) != it->lobes.size())
@@ -264,12 +246,10 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
 
 Result<std::vector<MeasuredLafortune>> ReadMeasuredLafortuneFits(
     const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Error{path.string() + ": cannot open"};
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) return Error{path.string() + ": read error"};
-  return ParseMeasuredLafortuneFits(text.str(), path.string());
+  // The reader's own words ("cannot open") whatever ReadTextFile found.
+  auto text = ReadTextFile(path, "Lafortune fits file");
+  if (!text) return Error{path.string() + ": cannot open"};
+  return ParseMeasuredLafortuneFits(*text, path.string());
 }
 
 }  // namespace digitize

@@ -4,12 +4,13 @@
 
 #include <algorithm>
 #include <atomic>
-#include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <string>
 
 #include "digitize/image_io.h"
+#include "json_fields.h"
 
 namespace digitize {
 namespace fs = std::filesystem;
@@ -65,6 +66,30 @@ Status WriteMarker(const fs::path& dir, const FolderOutput& output) {
   return WriteTextFile(dir / kOutputMarkerName, marker.dump(1) + "\n");
 }
 
+// What an output marker records (WriteMarker); nullopt when `path` is none: unreadable, not JSON,
+// another format, or a field of the wrong type.
+struct Marker {
+  std::string command, content;
+  std::set<std::string> files;
+};
+std::optional<Marker> ReadMarker(const fs::path& path) {
+  auto text = ReadTextFile(path, "output marker");
+  if (!text) return std::nullopt;
+  try {
+    const nlohmann::json doc = ParseJson(*text, path.string());
+    const Fields f(doc, path.string());
+    if (!f.Has("format") || f.String("format") != kOutputMarkerFormat) return std::nullopt;
+    Marker marker;
+    marker.content = f.Has("content") ? f.String("content") : "";
+    marker.command = f.Has("command") ? f.String("command") : "?";
+    for (const nlohmann::json& file : f.Array("files"))
+      if (file.is_string()) marker.files.insert(file.get<std::string>());
+    return marker;
+  } catch (const BadInput&) {
+    return std::nullopt;
+  }
+}
+
 }  // namespace
 
 Status CheckOutputPath(const fs::path& out, const std::vector<fs::path>& inputs) {
@@ -107,20 +132,14 @@ Status CheckReplaceable(const fs::path& dir, const std::string& content) {
   if (!has_marker)
     return Error{name + ": holds '" + entries->front() + "' and was not written by digitize" +
                  advice};
-  std::ifstream in(dir / kOutputMarkerName);
-  const nlohmann::json marker = nlohmann::json::parse(in, nullptr, false);
-  if (!marker.is_object() || marker.value("format", "") != kOutputMarkerFormat ||
-      !marker.contains("files") || !marker["files"].is_array())
+  const std::optional<Marker> marker = ReadMarker(dir / kOutputMarkerName);
+  if (!marker)
     return Error{name + ": its " + kOutputMarkerName + " is not a digitize output marker" + advice};
-  const std::string found = marker.value("content", "");
-  if (found != content)
-    return Error{name + ": holds the " + found + " output of `digitize " +
-                 marker.value("command", "?") + "`, not a " + content + " output" + advice};
-  std::set<std::string> written;
-  for (const auto& f : marker["files"])
-    if (f.is_string()) written.insert(f.get<std::string>());
+  if (marker->content != content)
+    return Error{name + ": holds the " + marker->content + " output of `digitize " +
+                 marker->command + "`, not a " + content + " output" + advice};
   for (const std::string& entry : *entries)
-    if (!written.count(entry))
+    if (!marker->files.count(entry))
       return Error{name + ": holds '" + entry + "', which digitize did not write" + advice};
   return Status::Ok();
 }

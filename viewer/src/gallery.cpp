@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "digitize/image_io.h"
 #include "digitize/output_dir.h"
@@ -17,10 +18,12 @@ namespace digitize::viewer {
 
 Result<std::vector<ViewCamera>> ReadCameraPath(const std::filesystem::path& path) {
   const std::string name = path.string();
-  std::ifstream in(path);
-  if (!in) return Error{name + ": cannot open"};
+  // The viewer's own words ("cannot open") whatever ReadTextFile found.
+  auto text = ReadTextFile(path, "camera path");
+  if (!text) return Error{name + ": cannot open"};
   nlohmann::json j;
   try {
+    std::istringstream in(*text);  // operator>>: trailing text after the object is ignored
     in >> j;
   } catch (const std::exception& e) {
     return Error{name + ": not JSON (" + e.what() + ")"};

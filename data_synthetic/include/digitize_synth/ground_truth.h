@@ -33,7 +33,7 @@ struct PreprocessAccuracy {
                                      // canvas (off its grid or on kOutside texels); not counted
                                      // as uncovered: the mask IoU reports that loss
   size_t normals_compared = 0;       // texels whose 3x3 neighbourhood has height
-  // Scans unlike the default (issue 10, section 4):
+  // Frame errors (they show on scans unlike the default):
   double axis_error_deg = 0;       // estimated canvas X axis vs the canvas edges (in-plane)
   double extent_error_mm = 0;      // max over X, Y of |estimated extent - visible extent|
   double bare_plane_tilt_deg = 0;  // estimated normal vs the bare canvas's least-squares plane

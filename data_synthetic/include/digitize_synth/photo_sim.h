@@ -1,4 +1,4 @@
-// Synthetic photo sets of a synthetic painting (issue 3 section 1): registered photographs under
+// Synthetic photo sets of a synthetic painting (docs/formats.md): registered photographs under
 // known point lights, rendered with Embree from the framed-painting Scene (scan_sim.h), with their
 // ground truth -- per-texel reflectance by paint region, and held-out images (lights and views
 // not in the fitting set) rendered without noise for judging a fit.

@@ -1,5 +1,5 @@
-// Accuracy of a reflectance fit against the generator's ground truth, by paint region (issue 3:
-// "parameter errors reported by region").
+// Accuracy of a reflectance fit against the generator's ground truth: parameter errors reported
+// by paint region.
 //
 // Each fitted texel (status not kTooFewSamples, state not kOutside) is mapped to the painting:
 // its centre (X, Y, height) in the FITTED canvas frame goes to the scan frame (fitted

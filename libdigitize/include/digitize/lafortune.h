@@ -1,8 +1,8 @@
-// The Lafortune BRDF (SPEC step 6; Lafortune et al. 1997, McAllister et al. 2002): the one-lobe
-// model the per-texel fit stores, and the multi-lobe model of published gonioreflectometer fits,
-// used as ground truth that the one-lobe model cannot match exactly.
+// The Lafortune BRDF (seed 001, per-texel fit; Lafortune et al. 1997, McAllister et al. 2002): the
+// one-lobe model the per-texel fit stores, and the multi-lobe model of published gonioreflectometer
+// fits, used as ground truth that the one-lobe model cannot match exactly.
 //
-// Layer: brdf (depends on core only).
+// Layer: brdf (depends on core; io reads the measured fits file).
 //
 // Frame: every direction is a unit vector in the texel's local tangent frame (z = the normal),
 // pointing AWAY from the surface: v towards the camera, l towards the light. Both models are

@@ -1,6 +1,6 @@
-// Photo sets, as users have them (issue 3, section 1): registered photographs of the painting under
+// Photo sets, as users have them (docs/formats.md): registered photographs of the painting under
 // known lights, read from a calibration JSON or from an RTI capture (.lp), with their pixels
-// loaded as linear RGB. Formats, units and frames: docs/formats.md, "Photo sets (issue 3)".
+// loaded as linear RGB. Formats, units and frames: docs/formats.md, "Photo sets".
 //
 // Layer: io (core + image_io). No OpenImageIO or JSON type appears here.
 //

@@ -1,5 +1,5 @@
-// Per-texel reflectance maps: the product of `digitize fit` (issue 3) and, with the canvas, the
-// content of a texture pack (issue 4). One value per canvas texel (same grid as the HeightField).
+// Per-texel reflectance maps: the product of `digitize fit` and, with the canvas, the content of a
+// texture pack (docs/formats.md). One value per canvas texel (same grid as the HeightField).
 //
 // Layer: brdf (core + lafortune.h + brdf_fit.h).
 //
