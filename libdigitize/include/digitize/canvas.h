@@ -1,4 +1,4 @@
-// Canvas extraction (SPEC steps 1-2; paper 4.2): find the canvas in a scan of a framed painting
+// Canvas extraction (paper section 4.2): find the canvas in a scan of a framed painting
 // and the rigid transform into the canvas frame (see height_field.h for that frame).
 //
 // Steps: PCA plane of all valid points -> heights along its normal -> Sobel magnitude -> region

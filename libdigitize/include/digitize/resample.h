@@ -1,9 +1,9 @@
-// Resampling of the canvas part of a scan onto a regular grid in the canvas frame (SPEC step 2,
-// end). The scan's own pixel grid is triangulated (two triangles per quad of valid canvas
-// samples, none across a height step) and every triangle is rasterised into the canvas grid with
-// linear interpolation; where triangles overlap, the highest wins (a height field is seen from
-// above). Texels no triangle covers are holes: small ones are inpainted (TexelState::kFilled),
-// larger ones inpainted for continuity but marked kUnfilled.
+// Resampling of the canvas part of a scan onto a regular grid in the canvas frame (paper section
+// 4.2, end; docs/architecture.md, step 7). The scan's own pixel grid is triangulated (two triangles
+// per quad of valid canvas samples, none across a height step) and every triangle is rasterised
+// into the canvas grid with linear interpolation; where triangles overlap, the highest wins (a
+// height field is seen from above). Texels no triangle covers are holes: small ones are inpainted
+// (TexelState::kFilled), larger ones inpainted for continuity but marked kUnfilled.
 #pragma once
 
 #include "digitize/canvas.h"

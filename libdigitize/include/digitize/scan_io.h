@@ -1,6 +1,7 @@
-// Reading and writing scans in the formats users have (SPEC "Inputs users already have"):
+// Reading and writing scans in the formats users have (docs/formats.md, "Scans"):
 //   - float EXR / TIFF, 3 channels: X, Y, Z in mm (scan frame);
-//   - float EXR / TIFF, 1 channel: depth (Z, mm) on a regular grid of pixel_pitch_mm (orthographic);
+//   - float EXR / TIFF, 1 channel: depth (Z, mm) on a regular grid of pixel_pitch_mm
+//     (orthographic);
 //   - 16-bit PNG / TIFF, 1 channel: depth = value * height_scale_mm (+ height_offset_mm), value 0 =
 //     missing, on a regular grid of pixel_pitch_mm;
 //   - PLY point grids (OpenMesh): vertices in row-major order with "width"/"height" given in a
@@ -12,7 +13,7 @@
 #include <string>
 
 #include "digitize/core.h"
-#include "digitize/scan.h"
+#include "digitize/scan_data.h"
 
 namespace digitize {
 
