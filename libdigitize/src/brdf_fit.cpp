@@ -188,7 +188,8 @@ Status BrdfFitOptions::Validate() const {
     return Error{"min_samples must be >= 1 (samples per texel), got " +
                  std::to_string(min_samples)};
   if (!(std::isfinite(noise_sigma) && noise_sigma >= 0.0))
-    return Error{"noise_sigma must be finite and >= 0 (radiance units), got " + FormatNumber(noise_sigma)};
+    return Error{"noise_sigma must be finite and >= 0 (radiance units), got " +
+                 FormatNumber(noise_sigma)};
   if (std::isnan(diffuse_chi2_sigmas) || std::isinf(diffuse_chi2_sigmas))
     return Error{"diffuse_chi2_sigmas must be finite (standard deviations; < 0 disables), got " +
                  FormatNumber(diffuse_chi2_sigmas)};
@@ -198,7 +199,8 @@ Status BrdfFitOptions::Validate() const {
   if (!(std::isfinite(k_min) && k_min >= 0.5))
     return Error{"k_min must be finite and >= 0.5 (lobe exponent), got " + FormatNumber(k_min)};
   if (!(std::isfinite(k_max) && k_max > k_min && k_max <= 1e6))
-    return Error{"k_max must be finite, > k_min and <= 1e6 (lobe exponent), got " + FormatNumber(k_max)};
+    return Error{"k_max must be finite, > k_min and <= 1e6 (lobe exponent), got " +
+                 FormatNumber(k_max)};
   if (!(std::isfinite(max_specular_albedo) && max_specular_albedo > 0.0))
     return Error{"max_specular_albedo must be finite and > 0 (fraction of the irradiance), got " +
                  FormatNumber(max_specular_albedo)};
@@ -206,7 +208,8 @@ Status BrdfFitOptions::Validate() const {
     return Error{"specular_prior_weight must be finite and >= 0 (noise variances), got " +
                  FormatNumber(specular_prior_weight)};
   if (!(std::isfinite(lobe_prior_weight) && lobe_prior_weight >= 0.0))
-    return Error{"lobe_prior_weight must be finite and >= 0, got " + FormatNumber(lobe_prior_weight)};
+    return Error{"lobe_prior_weight must be finite and >= 0, got " +
+                 FormatNumber(lobe_prior_weight)};
   if (max_iterations < 1)
     return Error{"max_iterations must be >= 1, got " + std::to_string(max_iterations)};
   if (num_threads < 0)

@@ -11,6 +11,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -48,20 +49,26 @@ constexpr double kOverhangRiseMm = 1.0;
 constexpr double kOverhangMm = 1.0;
 constexpr double kOverhangSpacings = 2.0;
 constexpr double kOverhangShare = 0.2;
-}  // namespace
+// Where each scan pixel's ray meets the canvas plane: a homography pixel -> (u, v).
+struct PlaneMap {
+  cv::Matx33d H;
+  double z_sign = 1;  // sign of the third coordinate on the plane's side of the horizon
+  // Pixels whose rays miss the plane (beyond its horizon in the image: the homography's third
+  // coordinate changes sign) have no place on it: NaN, which every test reads as outside.
+  Eigen::Vector2d operator()(int x, int y) const {
+    const double X = H(0, 0) * x + H(0, 1) * y + H(0, 2), Y = H(1, 0) * x + H(1, 1) * y + H(1, 2),
+                 Z = H(2, 0) * x + H(2, 1) * y + H(2, 2);
+    if (!(Z * z_sign > 1e-12))
+      return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+    return Eigen::Vector2d(X / Z, Y / Z);
+  }
+};
 
-// Outward normal of side s in (u, v) for a rectangle at `angle`.
-Eigen::Vector2d SideNormal(int s, double angle) {
-  const Eigen::Vector2d e0(std::cos(angle), std::sin(angle)), e1(-std::sin(angle), std::cos(angle));
-  return s == 0 ? e0 : s == 1 ? Eigen::Vector2d(-e0) : s == 2 ? e1 : Eigen::Vector2d(-e1);
-}
-
-Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
-                   const cv::Mat& fit_mask, const LocalFrame& frame, double noise_sigma,
-                   double spacing) {
-  Outline out;
+// The homography fitted to the (relief-trimmed by reprojection) canvas samples of `fit_mask`;
+// none (and why in `note`) from too few samples or a degenerate fit.
+std::optional<PlaneMap> FitPlaneMap(const Grid<Vec3f>& xyz, const cv::Mat& fit_mask,
+                                    const LocalFrame& frame, std::string* note) {
   const int w = xyz.width, h = xyz.height;
-  // Homography pixel -> (u, v), fitted to the (relief-trimmed by reprojection) canvas samples.
   cv::Mat hom;
   cv::Point2f ref_px;  // a canvas sample's pixel: on the plane's side of the horizon
   {
@@ -78,8 +85,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         }
     }
     if (px.size() < 12) {
-      out.note = "too few canvas samples for the outline";
-      return out;
+      *note = "too few canvas samples for the outline";
+      return std::nullopt;
     }
     ref_px = px[px.size() / 2];
     for (int pass = 0; pass < 2; ++pass) {
@@ -98,33 +105,31 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       px.swap(px2), uv.swap(uv2);
     }
     if (hom.empty() || !cv::checkRange(hom)) {
-      out.note = "no homography from the scan pixels to the canvas plane";
-      return out;
+      *note = "no homography from the scan pixels to the canvas plane";
+      return std::nullopt;
     }
   }
   const cv::Matx33d H(hom);
-  // Pixels whose rays miss the plane (beyond its horizon in the image: the homography's third
-  // coordinate changes sign) have no place on it: NaN, which every test below reads as outside.
   const double z_sign = H(2, 0) * ref_px.x + H(2, 1) * ref_px.y + H(2, 2) >= 0 ? 1.0 : -1.0;
-  auto plane_of = [&H, z_sign](int x, int y) -> Eigen::Vector2d {
-    const double X = H(0, 0) * x + H(0, 1) * y + H(0, 2), Y = H(1, 0) * x + H(1, 1) * y + H(1, 2),
-                 Z = H(2, 0) * x + H(2, 1) * y + H(2, 2);
-    if (!(Z * z_sign > 1e-12))
-      return Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
-    return Eigen::Vector2d(X / Z, Y / Z);
-  };
+  return PlaneMap{H, z_sign};
+}
 
-  // First guess: minimum-area rectangle of the mask's boundary pixels, placed by the homography.
-  // Rows in parallel, gathered in row order (the same result whatever the schedule).
-  auto gather_rows = [h](auto&& row_fn, auto& per_row) {
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& r) {
-      for (int y = r.begin(); y < r.end(); ++y) row_fn(y, per_row[static_cast<size_t>(y)]);
-    });
-  };
+// Rows in parallel, gathered in row order (the same result whatever the schedule).
+template <class RowFn, class PerRow>
+void GatherRows(int h, const RowFn& row_fn, PerRow& per_row) {
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y < r.end(); ++y) row_fn(y, per_row[static_cast<size_t>(y)]);
+  });
+}
+
+// The mask's boundary pixels, placed on the plane.
+std::vector<cv::Point2f> MaskBoundaryOnPlane(const cv::Mat& mask, const PlaneMap& plane_of) {
+  const int w = mask.cols, h = mask.rows;
   std::vector<cv::Point2f> boundary;
   {
     std::vector<std::vector<cv::Point2f>> per_row(static_cast<size_t>(h));
-    gather_rows(
+    GatherRows(
+        h,
         [&](int y, std::vector<cv::Point2f>& row_out) {
           const uint8_t* m = mask.ptr<uint8_t>(y);
           for (int x = 0; x < w; ++x) {
@@ -141,39 +146,62 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         per_row);
     for (const auto& row : per_row) boundary.insert(boundary.end(), row.begin(), row.end());
   }
-  if (boundary.size() < 8) {
-    out.note = "mask too small for an outline";
-    return out;
-  }
+  return boundary;
+}
+
+// First guess: the minimum-area rectangle of the boundary.
+struct FirstGuess {
+  double angle0 = 0;  // first axis in (u, v), radians
+  Eigen::Vector2d centre{0, 0};
+  double half0[2] = {0, 0};       // half sizes along the first and the second axis
+  std::array<double, 4> edge0{};  // outward offsets of the sides, as Outline::edge
+};
+
+FirstGuess GuessRectangle(const std::vector<cv::Point2f>& boundary) {
   const cv::RotatedRect guess = cv::minAreaRect(boundary);
   cv::Point2f corner[4];
   guess.points(corner);
   const cv::Point2f e0 = corner[1] - corner[0], e1 = corner[2] - corner[1];
-  const double angle0 = std::atan2(e0.y, e0.x);
+  FirstGuess out;
+  out.angle0 = std::atan2(e0.y, e0.x);
   out.centre = Eigen::Vector2d(guess.center.x, guess.center.y);
-  const double half0[2] = {0.5 * cv::norm(e0), 0.5 * cv::norm(e1)};
-  const std::array<double, 4> edge0 = {half0[0], half0[0], half0[1], half0[1]};
-  const double band = std::max(kOutlineBandMm, kOutlineBandSpacings * spacing);
+  out.half0[0] = 0.5 * cv::norm(e0);
+  out.half0[1] = 0.5 * cv::norm(e1);
+  out.edge0 = {out.half0[0], out.half0[0], out.half0[1], out.half0[1]};
+  return out;
+}
 
-  // Samples in the band around the guess, each on its nearest side.
-  struct Cand {
-    int side;
-    float t, o;    // along the side, outwards (first-guess frame)
-    float u, v;    // where the pixel's ray meets the plane
-    float uo, vo;  // the sample projected on the plane (valid only)
-    float height;  // above the plane (valid only)
-    uint8_t in_mask, usable, scan_border;
-  };
+// A pixel in the band around the first guess, on its nearest side.
+struct Cand {
+  int side;
+  float t, o;    // along the side, outwards (first-guess frame)
+  float u, v;    // where the pixel's ray meets the plane
+  float uo, vo;  // the sample projected on the plane (valid only)
+  float height;  // above the plane (valid only)
+  uint8_t in_mask, usable, scan_border;
+};
+using SideCandidates = std::array<std::vector<Cand>, 4>;
+
+// Samples in the band (mm either side of the first guess), each on its nearest side.
+SideCandidates GatherSideCandidates(const Grid<Vec3f>& xyz, const cv::Mat& mask,
+                                    const cv::Mat& valid, const LocalFrame& frame,
+                                    const PlaneMap& plane_of, const FirstGuess& guess,
+                                    double band) {
+  const int w = xyz.width, h = xyz.height;
+  const double angle0 = guess.angle0;
+  const std::array<double, 4>& edge0 = guess.edge0;
+  const Eigen::Vector2d& centre = guess.centre;
   std::array<std::vector<Cand>, 4> side_cands;
   const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0),
                                  SideNormal(2, angle0), SideNormal(3, angle0)};
   std::vector<std::array<std::vector<Cand>, 4>> cands_per_row(static_cast<size_t>(h));
-  gather_rows(
+  GatherRows(
+      h,
       [&](int y, std::array<std::vector<Cand>, 4>& row_out) {
         const uint8_t* m = mask.ptr<uint8_t>(y);
         const uint8_t* ok = valid.ptr<uint8_t>(y);
         for (int x = 0; x < w; ++x) {
-          const Eigen::Vector2d q = plane_of(x, y), d = q - out.centre;
+          const Eigen::Vector2d q = plane_of(x, y), d = q - centre;
           int best = -1;
           double best_dist = band;
           for (int s = 0; s < 4; ++s) {
@@ -206,14 +234,29 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       side_cands[static_cast<size_t>(s)].insert(side_cands[static_cast<size_t>(s)].end(),
                                                 row[static_cast<size_t>(s)].begin(),
                                                 row[static_cast<size_t>(s)].end());
+  return side_cands;
+}
 
-  // Per side: the local canvas height (a line along the side, from the band's inner half),
-  // canvas-like samples, open or closed, and the side's angle.
-  const double tol = std::max(kOutlineHeightSigmas * noise_sigma, kOutlineHeightFloorMm);
-  std::array<std::vector<uint8_t>, 4> canvas_like;
-  std::array<Eigen::Vector2d, 4> height_line;  // height = [0] + [1] t
-  std::array<double, 4> delta{}, weight{};
-  std::array<double, 4> half_len{};
+// Per side: the local canvas height (a line along the side, from the band's inner half),
+// canvas-like samples (within `tol` of it), open or closed, and the side's angle.
+struct SideFits {
+  std::array<std::vector<uint8_t>, 4> canvas_like;  // per candidate
+  std::array<Eigen::Vector2d, 4> height_line;       // height = [0] + [1] t
+  std::array<double, 4> delta{}, weight{};          // angle against the guess; its weight
+  std::array<double, 4> half_len{};                 // half length of the side
+};
+
+SideFits FitSides(const SideCandidates& side_cands, const FirstGuess& guess, double band,
+                  double tol, double spacing, std::array<bool, 4>* closed_out) {
+  const double(&half0)[2] = guess.half0;
+  const std::array<double, 4>& edge0 = guess.edge0;
+  std::array<bool, 4>& closed = *closed_out;
+  SideFits fits;
+  std::array<std::vector<uint8_t>, 4>& canvas_like = fits.canvas_like;
+  std::array<Eigen::Vector2d, 4>& height_line = fits.height_line;
+  std::array<double, 4>& delta = fits.delta;
+  std::array<double, 4>& weight = fits.weight;
+  std::array<double, 4>& half_len = fits.half_len;
   for (int s = 0; s < 4; ++s) {
     const auto& cands = side_cands[static_cast<size_t>(s)];
     const double e = edge0[static_cast<size_t>(s)];
@@ -273,11 +316,11 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
         pts.emplace_back(-corner_cut + (b + 0.5) * spacing, cands[static_cast<size_t>(best)].o);
     }
     // Open: too little of the side's edge is in view to place it.
-    out.closed[static_cast<size_t>(s)] =
+    closed[static_cast<size_t>(s)] =
         static_cast<int>(pts.size()) >= kOutlineMinBins &&
         pts.back().x() - pts.front().x() >=
             kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)];
-    if (!out.closed[static_cast<size_t>(s)]) continue;
+    if (!closed[static_cast<size_t>(s)]) continue;
     double beta = 0;
     bool fitted = false;
     for (int pass = 0; pass < 4 && pts.size() >= 3; ++pass) {
@@ -310,25 +353,19 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     delta[static_cast<size_t>(s)] = std::atan(kSign[s] * beta);
     weight[static_cast<size_t>(s)] = static_cast<double>(pts.size()) * span * span;
   }
-  double wsum = 0, dsum = 0;
-  for (int s = 0; s < 4; ++s)
-    wsum += weight[static_cast<size_t>(s)],
-        dsum += weight[static_cast<size_t>(s)] * delta[static_cast<size_t>(s)];
-  if (!(wsum > 0)) {
-    out.note = "no side of the canvas outline could be fitted";
-    return out;
-  }
-  const double d = dsum / wsum;
-  for (int s = 0; s < 4; ++s)
-    if (weight[static_cast<size_t>(s)] > 0 &&
-        std::fabs(delta[static_cast<size_t>(s)] - d) > kOutlineMaxSideDisagreeDeg * kPi / 180) {
-      out.note = "the outline's sides are not those of a rectangle";
-      return out;
-    }
-  out.angle = angle0 + d;
+  return fits;
+}
 
-  // Side positions in the refined frame: the threshold that best separates canvas-like samples
-  // (inside) from the others (outside); open sides reach the mask's extent.
+// Side positions in the refined frame: the threshold that best separates canvas-like samples
+// (inside) from the others (outside); open sides reach the mask's extent. Frame samples lying
+// over the visible canvas mark the side as overhung.
+void PlaceSides(const SideCandidates& side_cands, const SideFits& fits, const FirstGuess& guess,
+                double spacing, Outline* out_ptr) {
+  Outline& out = *out_ptr;
+  const std::array<std::vector<uint8_t>, 4>& canvas_like = fits.canvas_like;
+  const std::array<Eigen::Vector2d, 4>& height_line = fits.height_line;
+  const std::array<double, 4>& half_len = fits.half_len;
+  const std::array<double, 4>& edge0 = guess.edge0;
   for (int s = 0; s < 4; ++s) {
     const auto& cands = side_cands[static_cast<size_t>(s)];
     const auto& like = canvas_like[static_cast<size_t>(s)];
@@ -381,10 +418,19 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     }
     out.overhang[static_cast<size_t>(s)] = over > kOverhangShare * 2 * corner_cut / spacing;
   }
+}
 
-  // The mask: every pixel whose ray meets the plane inside the rectangle, but for samples the
-  // grown region left out: those stay out unless they lie a sample spacing inside it, within
-  // the canvas's height band (a frame sample grazed at the very edge is no canvas).
+// The mask: every pixel whose ray meets the plane inside the rectangle, but for samples the
+// grown region left out: those stay out unless they lie a sample spacing inside it, within
+// the canvas's height band (a frame sample grazed at the very edge is no canvas).
+// Not ok (why in the note) when it disagrees with the grown region.
+void RectangleMask(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
+                   const LocalFrame& frame, const PlaneMap& plane_of, const SideFits& fits,
+                   double tol, double spacing, Outline* out_ptr) {
+  Outline& out = *out_ptr;
+  const int w = xyz.width, h = xyz.height;
+  const std::array<Eigen::Vector2d, 4>& height_line = fits.height_line;
+  const std::array<double, 4>& half_len = fits.half_len;
   double band_mm = tol;
   for (int s = 0; s < 4; ++s)
     for (double t : {-half_len[static_cast<size_t>(s)], half_len[static_cast<size_t>(s)]})
@@ -419,9 +465,58 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
     out.note = "the canvas outline is not a rectangle (it differs from the grown region by " +
                std::to_string(static_cast<int>(100.0 * differ.load() / mask_px)) + " %)";
     out.mask.release();
-    return out;
+    return;
   }
   out.ok = true;
+}
+
+}  // namespace
+
+// Outward normal of side s in (u, v) for a rectangle at `angle`.
+Eigen::Vector2d SideNormal(int s, double angle) {
+  const Eigen::Vector2d e0(std::cos(angle), std::sin(angle)), e1(-std::sin(angle), std::cos(angle));
+  return s == 0 ? e0 : s == 1 ? Eigen::Vector2d(-e0) : s == 2 ? e1 : Eigen::Vector2d(-e1);
+}
+
+Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
+                   const cv::Mat& fit_mask, const LocalFrame& frame, double noise_sigma,
+                   double spacing) {
+  Outline out;
+  const std::optional<PlaneMap> plane_of = FitPlaneMap(xyz, fit_mask, frame, &out.note);
+  if (!plane_of) return out;
+  const std::vector<cv::Point2f> boundary = MaskBoundaryOnPlane(mask, *plane_of);
+  if (boundary.size() < 8) {
+    out.note = "mask too small for an outline";
+    return out;
+  }
+  const FirstGuess guess = GuessRectangle(boundary);
+  const double angle0 = guess.angle0;
+  out.centre = guess.centre;
+  const double band = std::max(kOutlineBandMm, kOutlineBandSpacings * spacing);
+  const SideCandidates side_cands =
+      GatherSideCandidates(xyz, mask, valid, frame, *plane_of, guess, band);
+  const double tol = std::max(kOutlineHeightSigmas * noise_sigma, kOutlineHeightFloorMm);
+  const SideFits fits = FitSides(side_cands, guess, band, tol, spacing, &out.closed);
+  const std::array<double, 4>& delta = fits.delta;
+  const std::array<double, 4>& weight = fits.weight;
+  double wsum = 0, dsum = 0;
+  for (int s = 0; s < 4; ++s)
+    wsum += weight[static_cast<size_t>(s)],
+        dsum += weight[static_cast<size_t>(s)] * delta[static_cast<size_t>(s)];
+  if (!(wsum > 0)) {
+    out.note = "no side of the canvas outline could be fitted";
+    return out;
+  }
+  const double d = dsum / wsum;
+  for (int s = 0; s < 4; ++s)
+    if (weight[static_cast<size_t>(s)] > 0 &&
+        std::fabs(delta[static_cast<size_t>(s)] - d) > kOutlineMaxSideDisagreeDeg * kPi / 180) {
+      out.note = "the outline's sides are not those of a rectangle";
+      return out;
+    }
+  out.angle = angle0 + d;
+  PlaceSides(side_cands, fits, guess, spacing, &out);
+  RectangleMask(xyz, mask, valid, frame, *plane_of, fits, tol, spacing, &out);
   return out;
 }
 

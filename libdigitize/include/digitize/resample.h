@@ -13,11 +13,11 @@
 namespace digitize {
 
 struct ResampleOptions {
-  double pitch_mm = 0;            // output texel spacing; 0 = the median scan sample spacing
-  double max_edge_factor = 4.0;   // triangles with an edge longer than this many pitches (in 3D)
-                                  // span a step or a gap and are not drawn
-  double max_hole_area_mm2 = 4.0; // holes up to this area are filled and reported; larger stay
-                                  // kUnfilled
+  double pitch_mm = 0;              // output texel spacing; 0 = the median scan sample spacing
+  double max_edge_factor = 4.0;     // triangles with an edge longer than this many pitches (in 3D)
+                                    // span a step or a gap and are not drawn
+  double max_hole_area_mm2 = 4.0;   // holes up to this area are filled and reported; larger stay
+                                    // kUnfilled
   int max_texels_per_side = 16384;  // refuse absurd grids (pitch too small for the canvas)
   Status Validate() const;
 };

@@ -10,18 +10,19 @@
 namespace digitize {
 
 struct SanitizeOptions {
-  double max_abs_coordinate_mm = 1e6;  // larger |x|,|y|,|z| are sensor garbage (1e30, Inf) -> missing
+  // larger |x|,|y|,|z| are sensor garbage (1e30, Inf) -> missing
+  double max_abs_coordinate_mm = 1e6;
   double spike_mm = 1.0;  // a sample farther than this from ALL its valid 8-neighbours (along the
                           // viewing axis) is an isolated outlier -> missing
   Status Validate() const;
 };
 
 struct SanitizeStats {
-  size_t total = 0;         // samples in the grid
-  size_t missing = 0;       // NaN on input
-  size_t non_finite = 0;    // Inf or beyond max_abs_coordinate_mm, set missing
-  size_t spikes = 0;        // isolated outliers, set missing
-  size_t valid = 0;         // what is left
+  size_t total = 0;       // samples in the grid
+  size_t missing = 0;     // NaN on input
+  size_t non_finite = 0;  // Inf or beyond max_abs_coordinate_mm, set missing
+  size_t spikes = 0;      // isolated outliers, set missing
+  size_t valid = 0;       // what is left
 };
 
 // Replaces non-finite, absurd and isolated-spike samples by NaN in place. Never fails.

@@ -18,11 +18,11 @@
 namespace digitize {
 
 struct ScanReadOptions {
-  double pixel_pitch_mm = 0;     // needed for depth-only inputs (1 channel); 0 = refuse them
-  double height_scale_mm = 0;    // needed for 16-bit integer inputs: mm per count; 0 = refuse
-  double height_offset_mm = 0;   // added after scaling
-  std::filesystem::path mask;    // optional mask image, same size as the scan
-  int grid_width = 0, grid_height = 0;  // PLY without a "comment grid" line
+  double pixel_pitch_mm = 0;    // needed for depth-only inputs (1 channel); 0 = refuse them
+  double height_scale_mm = 0;   // needed for 16-bit integer inputs: mm per count; 0 = refuse
+  double height_offset_mm = 0;  // added after scaling
+  std::filesystem::path mask;   // optional mask image, same size as the scan
+  int grid_width = 0, grid_height = 0;   // PLY without a "comment grid" line
   size_t max_samples = size_t{1} << 27;  // refuse larger grids (a corrupt header, not a scan)
   Status Validate() const;
 };
