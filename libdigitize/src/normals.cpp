@@ -1,4 +1,4 @@
-// Per-texel normals from the 8-neighbourhood fan (SPEC step 4; paper section 5).
+// Per-texel normals from the 8-neighbourhood fan (paper section 5).
 //
 // The 8 neighbours n_0..n_7 of a texel c, taken counter-clockwise in the canvas frame (X right,
 // Y up, so "north" is row y - 1), form the fan triangles (c, n_i, n_{i+1}) that tile the 3x3

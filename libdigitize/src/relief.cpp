@@ -1,4 +1,4 @@
-// Relief classification (SPEC step 3; paper 4.3).
+// Relief classification (paper section 4.3).
 //
 // Three passes, each parallel over bands of cell rows so a band never shares a cell with another:
 //   1. H = max height over texels with height;

@@ -16,10 +16,8 @@
 //    large (kUnfilled), the rest small (kFilled). Every hole is filled by push-pull interpolation
 //    relaxed towards a membrane (harmonic) fill, one component per task.
 #include "digitize/resample.h"
-#include "mask_ops.h"
 
 #include <tbb/blocked_range.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -27,23 +25,20 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
+
+#include "resample_holes.h"
 
 namespace digitize {
 namespace {
 
-constexpr float kMaxAbsCoordinateMm = 1e6f;  // as canvas.cpp: beyond is sensor garbage
+constexpr float kMaxAbsCoordinateMm = 1e6f;  // as canvas_steps.h: beyond is garbage
 constexpr int kChunk = 32;                   // quads per chunk of a scan row (rasteriser lists)
 constexpr int kBandRows = 32;                // output rows per rasteriser task
 constexpr float kBaryEps = 1e-5f;            // texel centres on a shared edge go to both sides
 constexpr size_t kStatSamples = 50000;       // subsample size for the median spacing
-constexpr double kPi = 3.14159265358979323846;
-constexpr size_t kMapSamples = 20000;         // samples fitting the pixel -> texel map
-constexpr int kMaxRelaxIterations = 200;      // membrane relaxation of a filled hole
-constexpr int kUnfilledRelaxIterations = 20;  // large holes: continuity only
-constexpr float kRelaxToleranceMm = 1e-5f;    // relaxation stops below this change per sweep
+constexpr size_t kMapSamples = 20000;        // samples fitting the pixel -> texel map
 constexpr float kLowest = std::numeric_limits<float>::lowest();
 
 inline bool Usable(const Vec3f& p) {
@@ -203,189 +198,20 @@ void DrawFootprint(TexelPoint a, TexelPoint b, TexelPoint c, TexelPoint d, int m
   }
 }
 
-// Scratch space of the hole filler, one per thread (no per-hole allocation in steady state).
-struct FillScratch {
-  std::vector<float> val, wt;  // pyramid levels, concatenated
-  std::vector<int> level_offset, level_w, level_h;
-  std::vector<uint8_t> role;      // level-0 role: 0 ignore, 1 known, 2 unknown
-  std::vector<uint32_t> unknown;  // level-0 unknown texels with a neighbour
+// ---- 1. Per scan row and chunk of kChunk + 1 vertices: the canvas-Y range (mm) of its canvas
+// samples, so every chunk of quads can be listed in the output bands it reaches.
+struct ChunkRanges {
+  int chunks_per_row = 1;
+  std::vector<float> row_ylo, row_yhi;  // [row * chunks_per_row + chunk]
+  size_t count = 0;                     // canvas samples (mask and usable)
 };
 
-// Fills the texels labelled `label` inside rect (which has a one-texel margin) from the covered
-// texels around them: push-pull initial values, then Gauss-Seidel relaxation of the membrane
-// equation. Writes only texels of this label; reads covered texels and its own.
-void FillHole(const cv::Rect& rect, int label, const cv::Mat& labels, const cv::Mat& covered,
-              float* height, int grid_w, int iterations, FillScratch& s) {
-  const int bw = rect.width, bh = rect.height;
-  s.level_offset.clear();
-  s.level_w.clear();
-  s.level_h.clear();
-  size_t total = 0;
-  for (int lw = bw, lh = bh;;) {
-    s.level_offset.push_back(static_cast<int>(total));
-    s.level_w.push_back(lw);
-    s.level_h.push_back(lh);
-    total += static_cast<size_t>(lw) * lh;
-    if (lw == 1 && lh == 1) break;
-    lw = (lw + 1) / 2;
-    lh = (lh + 1) / 2;
-  }
-  s.val.assign(total, 0.f);
-  s.wt.assign(total, 0.f);
-  s.role.assign(static_cast<size_t>(bw) * bh, 0);
-  bool any_known = false;
-  for (int y = 0; y < bh; ++y) {
-    const int gy = rect.y + y;
-    const int* lab = labels.ptr<int>(gy);
-    const uint8_t* cov = covered.ptr<uint8_t>(gy);
-    for (int x = 0; x < bw; ++x) {
-      const int gx = rect.x + x;
-      const size_t i = static_cast<size_t>(y) * bw + x;
-      if (cov[gx]) {
-        s.role[i] = 1;
-        s.val[i] = height[static_cast<size_t>(gy) * grid_w + gx];
-        s.wt[i] = 1;
-        any_known = true;
-      } else if (lab[gx] == label) {
-        s.role[i] = 2;
-      }
-    }
-  }
-  auto write_back = [&]() {
-    for (int y = 0; y < bh; ++y)
-      for (int x = 0; x < bw; ++x)
-        if (s.role[static_cast<size_t>(y) * bw + x] == 2)
-          height[static_cast<size_t>(rect.y + y) * grid_w + rect.x + x] =
-              s.val[static_cast<size_t>(y) * bw + x];
-  };
-  if (!any_known) {  // nothing to interpolate from: flat at the plane
-    for (float& v : s.val) v = 0;
-    write_back();
-    return;
-  }
-  const int levels = static_cast<int>(s.level_w.size());
-  // Push: weighted averages down the pyramid.
-  int top = levels - 1;
-  for (int l = 1; l < levels; ++l) {
-    const int pw = s.level_w[l - 1], ph = s.level_h[l - 1], lw = s.level_w[l], lh = s.level_h[l];
-    const float* pv = s.val.data() + s.level_offset[l - 1];
-    const float* pwt = s.wt.data() + s.level_offset[l - 1];
-    float* v = s.val.data() + s.level_offset[l];
-    float* wt = s.wt.data() + s.level_offset[l];
-    bool full = true;
-    for (int y = 0; y < lh; ++y)
-      for (int x = 0; x < lw; ++x) {
-        float sw = 0, sv = 0;
-        for (int dy = 0; dy < 2; ++dy)
-          for (int dx = 0; dx < 2; ++dx) {
-            const int cx = 2 * x + dx, cy = 2 * y + dy;
-            if (cx >= pw || cy >= ph) continue;
-            const size_t ci = static_cast<size_t>(cy) * pw + cx;
-            sw += pwt[ci];
-            sv += pwt[ci] * pv[ci];
-          }
-        const size_t i = static_cast<size_t>(y) * lw + x;
-        wt[i] = sw;
-        v[i] = sw > 0 ? sv / sw : 0;
-        full = full && sw > 0;
-      }
-    if (full) {
-      top = l;
-      break;
-    }
-  }
-  // Pull: empty cells take the bilinear interpolation of the coarser level.
-  for (int l = top - 1; l >= 0; --l) {
-    const int lw = s.level_w[l], lh = s.level_h[l], cw = s.level_w[l + 1], ch = s.level_h[l + 1];
-    float* v = s.val.data() + s.level_offset[l];
-    const float* wt = s.wt.data() + s.level_offset[l];
-    const float* cv = s.val.data() + s.level_offset[l + 1];
-    for (int y = 0; y < lh; ++y)
-      for (int x = 0; x < lw; ++x) {
-        const size_t i = static_cast<size_t>(y) * lw + x;
-        if (wt[i] > 0) continue;
-        const double fx = std::clamp((x + 0.5) / 2 - 0.5, 0.0, double(cw - 1));
-        const double fy = std::clamp((y + 0.5) / 2 - 0.5, 0.0, double(ch - 1));
-        const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
-        const int x1 = std::min(x0 + 1, cw - 1), y1 = std::min(y0 + 1, ch - 1);
-        const double ax = fx - x0, ay = fy - y0;
-        const double top_v = (1 - ax) * cv[static_cast<size_t>(y0) * cw + x0] +
-                             ax * cv[static_cast<size_t>(y0) * cw + x1];
-        const double bot_v = (1 - ax) * cv[static_cast<size_t>(y1) * cw + x0] +
-                             ax * cv[static_cast<size_t>(y1) * cw + x1];
-        v[i] = static_cast<float>((1 - ay) * top_v + ay * bot_v);
-      }
-  }
-  // Relax: unknown texels towards the mean of their known / unknown 4-neighbours (Gauss-Seidel
-  // over the list of unknown texels, each with its neighbour count).
-  float* v = s.val.data();
-  s.unknown.clear();
-  for (int y = 0; y < bh; ++y)
-    for (int x = 0; x < bw; ++x) {
-      const size_t i = static_cast<size_t>(y) * bw + x;
-      if (s.role[i] != 2) continue;
-      const int n = (x > 0 && s.role[i - 1]) + (x + 1 < bw && s.role[i + 1]) +
-                    (y > 0 && s.role[i - bw]) + (y + 1 < bh && s.role[i + bw]);
-      if (n > 0) s.unknown.push_back(static_cast<uint32_t>(i));
-    }
-  for (int it = 0; it < iterations; ++it) {
-    float change = 0;
-    for (const uint32_t i : s.unknown) {
-      const int x = static_cast<int>(i % bw), y = static_cast<int>(i / bw);
-      float sum = 0;
-      int n = 0;
-      if (x > 0 && s.role[i - 1]) sum += v[i - 1], ++n;
-      if (x + 1 < bw && s.role[i + 1]) sum += v[i + 1], ++n;
-      if (y > 0 && s.role[i - bw]) sum += v[i - bw], ++n;
-      if (y + 1 < bh && s.role[i + bw]) sum += v[i + bw], ++n;
-      const float next = sum / static_cast<float>(n);
-      change = std::max(change, std::fabs(next - v[i]));
-      v[i] = next;
-    }
-    if (change < kRelaxToleranceMm) break;
-  }
-  write_back();
-}
-
-}  // namespace
-
-Status ResampleOptions::Validate() const {
-  auto fail = [](const std::string& what) { return Status(Error{"resample options: " + what}); };
-  if (!(pitch_mm >= 0) || !std::isfinite(pitch_mm))
-    return fail("pitch_mm must be >= 0 (0 = the scan spacing), got " + std::to_string(pitch_mm));
-  if (!(max_edge_factor > 0) || !std::isfinite(max_edge_factor))
-    return fail("max_edge_factor must be > 0, got " + std::to_string(max_edge_factor));
-  if (!(max_hole_area_mm2 >= 0) || !std::isfinite(max_hole_area_mm2))
-    return fail("max_hole_area_mm2 must be >= 0, got " + std::to_string(max_hole_area_mm2));
-  if (max_texels_per_side < 1)
-    return fail("max_texels_per_side must be >= 1, got " + std::to_string(max_texels_per_side));
-  return Status::Ok();
-}
-
-Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
-                                         const ResampleOptions& options, ResampleStats* stats) {
-  const std::string src = scan.source.empty() ? "scan" : scan.source;
-  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
-  const Grid<Vec3f>& xyz = scan.xyz_mm;
+ChunkRanges MeasureChunkRanges(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask,
+                               const RigidTransform& canvas_from_scan) {
   const int sw = xyz.width, sh = xyz.height;
-  if (xyz.empty()) return Error{src + ": empty scan"};
-  if (canvas.mask_scan.width != sw || canvas.mask_scan.height != sh)
-    return Error{src + ": canvas mask is " + std::to_string(canvas.mask_scan.width) + "x" +
-                 std::to_string(canvas.mask_scan.height) + ", scan is " + std::to_string(sw) + "x" +
-                 std::to_string(sh)};
-  const Mat3d& rot = canvas.canvas_from_scan.rotation;
-  const Vec3d& trans = canvas.canvas_from_scan.translation;
-  if (!rot.allFinite() || !trans.allFinite() ||
-      !(rot.transpose() * rot).isApprox(Mat3d::Identity(), 1e-6) || !(rot.determinant() > 0))
-    return Error{src + ": canvas_from_scan is not a rigid transform"};
-  const Eigen::Vector2d extent = canvas.extent_mm;
-  if (!extent.allFinite() || extent.x() < 0 || extent.y() < 0)
-    return Error{src + ": invalid canvas extent"};
-
-  // ---- 1. Per scan row and chunk of kChunk + 1 vertices: the canvas-Y range (mm) of its canvas
-  // samples, so every chunk of quads can be listed in the output bands it reaches. 3D
-  // distances do not depend on the frame: the spacing is measured on the raw samples.
-  const int qw = std::max(0, sw - 1), qh = std::max(0, sh - 1);
+  const Mat3d& rot = canvas_from_scan.rotation;
+  const Vec3d& trans = canvas_from_scan.translation;
+  const int qw = std::max(0, sw - 1);
   const int chunks_per_row = std::max(1, (qw + kChunk - 1) / kChunk);
   const float flt_max = std::numeric_limits<float>::max();
   std::vector<float> row_ylo(static_cast<size_t>(chunks_per_row) * sh, flt_max);
@@ -396,7 +222,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
       [&](const tbb::blocked_range<int>& rows, size_t n) {
         for (int y = rows.begin(); y < rows.end(); ++y) {
           const Vec3f* in = xyz.Row(y);
-          const uint8_t* m = canvas.mask_scan.Row(y);
+          const uint8_t* m = mask.Row(y);
           float* lo = row_ylo.data() + static_cast<size_t>(y) * chunks_per_row;
           float* hi = row_yhi.data() + static_cast<size_t>(y) * chunks_per_row;
           for (int x = 0; x < sw; ++x) {
@@ -416,11 +242,32 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
         return n;
       },
       [](size_t a, size_t b) { return a + b; });
+  ChunkRanges out;
+  out.chunks_per_row = chunks_per_row;
+  out.row_ylo = std::move(row_ylo);
+  out.row_yhi = std::move(row_yhi);
+  out.count = count;
+  return out;
+}
+
+// The output grid: pitch (the scan spacing unless given), size, and the edge limit of the
+// triangles. 3D distances do not depend on the frame: the spacing is measured on the raw
+// samples. Errors: too few samples, no spacing to measure, too many texels.
+struct GridPlan {
+  double spacing = 0, pitch = 0;  // mm
+  int w = 1, h = 1;               // texels
+  double edge_limit = 0;          // mm
+  float edge_limit2 = 0;          // mm^2
+};
+
+Result<GridPlan> PlanGrid(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, size_t count,
+                          const Eigen::Vector2d& extent, const ResampleOptions& options,
+                          const std::string& src) {
   if (count < 3)
     return Error{src + ": the canvas mask holds " + std::to_string(count) +
                  " valid samples, too few to resample"};
-  double spacing = MedianSpacing(xyz, canvas.mask_scan, 1, 0, count);
-  if (!(spacing > 0)) spacing = MedianSpacing(xyz, canvas.mask_scan, 0, 1, count);
+  double spacing = MedianSpacing(xyz, mask, 1, 0, count);
+  if (!(spacing > 0)) spacing = MedianSpacing(xyz, mask, 0, 1, count);
   const double pitch = options.pitch_mm > 0 ? options.pitch_mm : spacing;
   if (!(pitch > 0) || !std::isfinite(pitch))
     return Error{src +
@@ -439,8 +286,22 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   // output pitch does not discard every triangle.
   const double edge_limit = options.max_edge_factor * std::max(pitch, spacing);
   const float edge_limit2 = static_cast<float>(edge_limit * edge_limit);
+  return GridPlan{spacing, pitch, w, h, edge_limit, edge_limit2};
+}
 
-  // ---- 2. Chunks of quads listed in the output bands (kBandRows texel rows) they reach.
+// ---- 2. Chunks of quads listed in the output bands (kBandRows texel rows) they reach. Frees
+// the ranges, which are not needed after.
+struct BandLists {
+  int bands = 0;
+  std::vector<std::vector<uint32_t>> band_chunks;  // per band: chunk indices
+  std::vector<int> first_band;  // per chunk: the band that counts its triangles (-1: none)
+};
+
+BandLists ListChunksInBands(ChunkRanges& ranges, const GridPlan& plan, int qh) {
+  const int chunks_per_row = ranges.chunks_per_row, h = plan.h;
+  const double spacing = plan.spacing, pitch = plan.pitch;
+  std::vector<float>& row_ylo = ranges.row_ylo;
+  std::vector<float>& row_yhi = ranges.row_yhi;
   const double margin_rows = 1.0 + spacing / pitch;
   const int bands = (h + kBandRows - 1) / kBandRows;
   const size_t chunk_count = static_cast<size_t>(chunks_per_row) * qh;
@@ -466,77 +327,101 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   std::vector<float>().swap(row_ylo);
   std::vector<float>().swap(row_yhi);
 
-  // ---- 3. Per band: transform the chunk's two vertex rows to texel coordinates, choose the
-  // quads' triangles, draw them into the band's rows.
-  HeightField field;
-  field.pitch_mm = pitch;
-  field.height_mm = Grid<float>(w, h, kLowest);
-  field.state = Grid<TexelState>(w, h, TexelState::kOutside);
-  float* out = field.height_mm.data.data();
-  // texel = (R p + t) scaled: x = X / pitch - 0.5, y = h - Y / pitch - 0.5; in float about a
-  // reference sample so the products stay small.
+  return BandLists{bands, std::move(band_chunks), std::move(first_band)};
+}
+
+// ---- 3. Texel coordinates: texel = (R p + t) scaled: x = X / pitch - 0.5,
+// y = h - Y / pitch - 0.5; in float about a reference sample so the products stay small.
+TexelTransform MakeTexelTransform(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask,
+                                  const RigidTransform& canvas_from_scan, double pitch, int h) {
+  const Mat3d& rot = canvas_from_scan.rotation;
+  const Vec3d& trans = canvas_from_scan.translation;
   TexelTransform tf;
-  {
-    Mat3d to_texel = rot;
-    to_texel.row(0) /= pitch;
-    to_texel.row(1) /= -pitch;
-    const Vec3d offset(trans.x() / pitch - 0.5, h - trans.y() / pitch - 0.5, trans.z());
-    Vec3d ref = Vec3d::Zero();
-    for (size_t i = xyz.size() / 2, k = 0; k < xyz.size(); ++k) {
-      const size_t j = (i + k) % xyz.size();
-      if (canvas.mask_scan.data[j] && Usable(xyz.data[j])) {
-        ref = xyz.data[j].cast<double>();
-        break;
-      }
+  Mat3d to_texel = rot;
+  to_texel.row(0) /= pitch;
+  to_texel.row(1) /= -pitch;
+  const Vec3d offset(trans.x() / pitch - 0.5, h - trans.y() / pitch - 0.5, trans.z());
+  Vec3d ref = Vec3d::Zero();
+  for (size_t i = xyz.size() / 2, k = 0; k < xyz.size(); ++k) {
+    const size_t j = (i + k) % xyz.size();
+    if (mask.data[j] && Usable(xyz.data[j])) {
+      ref = xyz.data[j].cast<double>();
+      break;
     }
-    tf.ref = ref.cast<float>();
-    tf.m = to_texel.cast<float>();
-    tf.t = (to_texel * tf.ref.cast<double>() + offset).cast<float>();
   }
-  // Texel position of a missing canvas sample (for the outline only): a quadratic map of the
-  // scan pixel fitted to the valid ones, unless the parallelogram of a quad's three valid
-  // corners gives it.
-  Eigen::Matrix<double, 6, 2> pixel_map = Eigen::Matrix<double, 6, 2>::Zero();
-  bool have_map = false;
-  auto basis = [sw, sh](int x, int y) {
+  tf.ref = ref.cast<float>();
+  tf.m = to_texel.cast<float>();
+  tf.t = (to_texel * tf.ref.cast<double>() + offset).cast<float>();
+  return tf;
+}
+
+// Texel position of a missing canvas sample (for the outline only): a quadratic map of the
+// scan pixel fitted to the valid ones, unless the parallelogram of a quad's three valid
+// corners gives it.
+struct PixelMap {
+  int sw = 0, sh = 0;  // scan size
+  Eigen::Matrix<double, 6, 2> coefficients = Eigen::Matrix<double, 6, 2>::Zero();
+  bool ok = false;
+  Eigen::Matrix<double, 6, 1> Basis(int x, int y) const {
     const double u = (x - 0.5 * sw) / std::max(sw, 1), v = (y - 0.5 * sh) / std::max(sh, 1);
     Eigen::Matrix<double, 6, 1> b;
     b << 1, u, v, u * u, u * v, v * v;
     return b;
-  };
-  {
-    const int stride =
-        std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count) / kMapSamples)));
-    Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 2> atb = Eigen::Matrix<double, 6, 2>::Zero();
-    size_t n = 0;
-    for (int y = 0; y < sh; y += stride)
-      for (int x = 0; x < sw; x += stride) {
-        if (!canvas.mask_scan(x, y) || !Usable(xyz(x, y))) continue;
-        const Eigen::Vector3f t = tf.m * (xyz(x, y) - tf.ref) + tf.t;
-        const Eigen::Matrix<double, 6, 1> b = basis(x, y);
-        ata += b * b.transpose();
-        atb.col(0) += b * t.x();
-        atb.col(1) += b * t.y();
-        ++n;
-      }
-    if (n >= 12) {
-      pixel_map = ata.completeOrthogonalDecomposition().solve(atb);
-      have_map = pixel_map.allFinite();
-    }
   }
-  auto predict = [&](int x, int y) {
-    const Eigen::Matrix<double, 6, 1> b = basis(x, y);
-    return TexelPoint{static_cast<float>(b.dot(pixel_map.col(0))),
-                      static_cast<float>(b.dot(pixel_map.col(1))), 0.f};
-  };
-  Grid<uint8_t> footprint(w, h, 0);  // texels inside mask quads whose triangles were not drawn
+  TexelPoint operator()(int x, int y) const {
+    const Eigen::Matrix<double, 6, 1> b = Basis(x, y);
+    return TexelPoint{static_cast<float>(b.dot(coefficients.col(0))),
+                      static_cast<float>(b.dot(coefficients.col(1))), 0.f};
+  }
+};
+
+PixelMap FitPixelMap(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, const TexelTransform& tf,
+                     size_t count) {
+  const int sw = xyz.width, sh = xyz.height;
+  PixelMap map;
+  map.sw = sw;
+  map.sh = sh;
+  const int stride =
+      std::max(1, static_cast<int>(std::sqrt(static_cast<double>(count) / kMapSamples)));
+  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 2> atb = Eigen::Matrix<double, 6, 2>::Zero();
+  size_t n = 0;
+  for (int y = 0; y < sh; y += stride)
+    for (int x = 0; x < sw; x += stride) {
+      if (!mask(x, y) || !Usable(xyz(x, y))) continue;
+      const Eigen::Vector3f t = tf.m * (xyz(x, y) - tf.ref) + tf.t;
+      const Eigen::Matrix<double, 6, 1> b = map.Basis(x, y);
+      ata += b * b.transpose();
+      atb.col(0) += b * t.x();
+      atb.col(1) += b * t.y();
+      ++n;
+    }
+  if (n >= 12) {
+    map.coefficients = ata.completeOrthogonalDecomposition().solve(atb);
+    map.ok = map.coefficients.allFinite();
+  }
+  return map;
+}
+
+// Per band (one task each, so no two write the same texel): the chunk's two vertex rows in
+// texel coordinates, the quads' triangles chosen and drawn into the band's rows of `out`
+// (highest wins), and the footprints of mask quads whose triangles were not drawn.
+Counts RasteriseBands(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, const TexelTransform& tf,
+                      const PixelMap& predict, const BandLists& lists, const GridPlan& plan,
+                      int chunks_per_row, float* out, Grid<uint8_t>* footprint) {
+  const int qw = std::max(0, xyz.width - 1);
+  const int w = plan.w, h = plan.h, bands = lists.bands;
+  const bool have_map = predict.ok;
+  const float edge_limit2 = plan.edge_limit2;
+  const double pitch = plan.pitch;
+  const std::vector<std::vector<uint32_t>>& band_chunks = lists.band_chunks;
+  const std::vector<int>& first_band = lists.first_band;
   const float pitch2 = static_cast<float>(pitch * pitch);
   auto dist2 = [pitch2](const TexelPoint& p, const TexelPoint& q) {
     const float dx = p.x - q.x, dy = p.y - q.y, dh = p.h - q.h;
     return (dx * dx + dy * dy) * pitch2 + dh * dh;
   };
-  const Counts counts = tbb::parallel_reduce(
+  return tbb::parallel_reduce(
       tbb::blocked_range<int>(0, bands, 1), Counts{},
       [&](const tbb::blocked_range<int>& br, Counts cnt) {
         TexelPoint r0[kChunk + 1], r1[kChunk + 1];
@@ -547,10 +432,10 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
             const int x0 = static_cast<int>(ci % chunks_per_row) * kChunk;
             const int x1 = std::min(qw, x0 + kChunk);  // quads x0 .. x1 - 1
             const bool count_here = first_band[ci] == b;
-            const uint8_t* m0 = canvas.mask_scan.Row(y) + x0;
-            const uint8_t* m1 = canvas.mask_scan.Row(y + 1) + x0;
+            const uint8_t* m0 = mask.Row(y) + x0;
+            const uint8_t* m1 = mask.Row(y + 1) + x0;
             for (int r = 0; r < 2; ++r)
-              TexelRow(xyz.Row(y + r) + x0, canvas.mask_scan.Row(y + r) + x0, x1 - x0 + 1, tf,
+              TexelRow(xyz.Row(y + r) + x0, mask.Row(y + r) + x0, x1 - x0 + 1, tf,
                        r == 0 ? r0 : r1);
             for (int x = x0; x < x1; ++x) {
               const TexelPoint &A = r0[x - x0], &B = r0[x - x0 + 1], &C = r1[x - x0],
@@ -563,7 +448,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
               if (nvalid < 3) {
                 if (nmask >= 3 && have_map)
                   DrawFootprint(A, B, C, D, ma, mb, mc, md, x, y, predict, w, row0, row1,
-                                footprint.data.data());
+                                footprint->data.data());
                 continue;
               }
               uint8_t cand = 0;
@@ -590,7 +475,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
               }
               if (kBits[keep] < 2 && nmask >= 3 && (nvalid == 3 || have_map))
                 DrawFootprint(A, B, C, D, ma, mb, mc, md, x, y, predict, w, row0, row1,
-                              footprint.data.data());
+                              footprint->data.data());
               if (!keep) continue;
               // Texel centres inside the quad's box (usually one or two), then per triangle.
               const TexelPoint* tri[2][3];
@@ -628,142 +513,90 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
         a.skipped += b.skipped;
         return a;
       });
+}
 
-  // ---- 4. Outline and holes.
+}  // namespace
+
+Status ResampleOptions::Validate() const {
+  auto fail = [](const std::string& what) { return Status(Error{"resample options: " + what}); };
+  if (!(pitch_mm >= 0) || !std::isfinite(pitch_mm))
+    return fail("pitch_mm must be >= 0 (0 = the scan spacing), got " + std::to_string(pitch_mm));
+  if (!(max_edge_factor > 0) || !std::isfinite(max_edge_factor))
+    return fail("max_edge_factor must be > 0, got " + std::to_string(max_edge_factor));
+  if (!(max_hole_area_mm2 >= 0) || !std::isfinite(max_hole_area_mm2))
+    return fail("max_hole_area_mm2 must be >= 0, got " + std::to_string(max_hole_area_mm2));
+  if (max_texels_per_side < 1)
+    return fail("max_texels_per_side must be >= 1, got " + std::to_string(max_texels_per_side));
+  return Status::Ok();
+}
+
+Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options, ResampleStats* stats) {
+  using resample_detail::HoleMap;
+  using resample_detail::HoleSizes;
+  using resample_detail::StateCounts;
+  const std::string src = scan.source.empty() ? "scan" : scan.source;
+  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
+  const Grid<Vec3f>& xyz = scan.xyz_mm;
+  const int sw = xyz.width, sh = xyz.height;
+  if (xyz.empty()) return Error{src + ": empty scan"};
+  if (canvas.mask_scan.width != sw || canvas.mask_scan.height != sh)
+    return Error{src + ": canvas mask is " + std::to_string(canvas.mask_scan.width) + "x" +
+                 std::to_string(canvas.mask_scan.height) + ", scan is " + std::to_string(sw) + "x" +
+                 std::to_string(sh)};
+  const Mat3d& rot = canvas.canvas_from_scan.rotation;
+  const Vec3d& trans = canvas.canvas_from_scan.translation;
+  if (!rot.allFinite() || !trans.allFinite() ||
+      !(rot.transpose() * rot).isApprox(Mat3d::Identity(), 1e-6) || !(rot.determinant() > 0))
+    return Error{src + ": canvas_from_scan is not a rigid transform"};
+  const Eigen::Vector2d extent = canvas.extent_mm;
+  if (!extent.allFinite() || extent.x() < 0 || extent.y() < 0)
+    return Error{src + ": invalid canvas extent"};
+
+  ChunkRanges ranges = MeasureChunkRanges(xyz, canvas.mask_scan, canvas.canvas_from_scan);
+  const Result<GridPlan> planned =
+      PlanGrid(xyz, canvas.mask_scan, ranges.count, extent, options, src);
+  if (!planned.ok()) return planned.error();
+  const GridPlan& plan = *planned;
+  const int w = plan.w, h = plan.h;
+  const BandLists lists = ListChunksInBands(ranges, plan, std::max(0, sh - 1));
+
+  HeightField field;
+  field.pitch_mm = plan.pitch;
+  field.height_mm = Grid<float>(w, h, kLowest);
+  field.state = Grid<TexelState>(w, h, TexelState::kOutside);
+  float* out = field.height_mm.data.data();
+  const TexelTransform tf =
+      MakeTexelTransform(xyz, canvas.mask_scan, canvas.canvas_from_scan, plan.pitch, h);
+  const PixelMap predict = FitPixelMap(xyz, canvas.mask_scan, tf, ranges.count);
+  Grid<uint8_t> footprint(w, h, 0);  // texels inside mask quads whose triangles were not drawn
+  const Counts counts = RasteriseBands(xyz, canvas.mask_scan, tf, predict, lists, plan,
+                                       ranges.chunks_per_row, out, &footprint);
+
   cv::Mat height_mat(h, w, CV_32F, out);
   cv::Mat covered;
   cv::compare(height_mat, kLowest, covered, cv::CMP_GT);  // 255 / 0
   if (cv::countNonZero(covered) == 0)
     return Error{src + ": no canvas triangle could be drawn (" + std::to_string(counts.skipped) +
-                 " skipped for edges longer than " + std::to_string(edge_limit) +
+                 " skipped for edges longer than " + std::to_string(plan.edge_limit) +
                  " mm; a scan one sample wide has none)"};
-  // The outline: the footprint of the canvas mask's quads (drawn, or covered with predicted
-  // positions of missing samples) and everything it encloses. Holes: uncovered texels inside.
-  cv::Mat inside;
-  cv::bitwise_or(covered, cv::Mat(h, w, CV_8U, footprint.data.data()), inside);
-  cv::bitwise_or(inside, EnclosedIslands(inside), inside);
-  std::vector<uint8_t>().swap(footprint.data);
-  cv::Mat holes;
-  cv::bitwise_and(inside, ~covered, holes);
-  cv::Mat labels, comp_stats, centroids;
-  const int ncomp =
-      cv::connectedComponentsWithStats(holes, labels, comp_stats, centroids, 8, CV_32S);
-  // Small holes: components of at most max_hole_area_mm2. Larger components are split: texels
-  // farther from measured ones than the radius r of a disc of that area are the cores of large
-  // holes, and everything within r of a core belongs to that large hole (kUnfilled); the rest is
-  // small gaps (kFilled), e.g. many scattered dropouts joined into one network of thin gaps.
-  const double texel_area = pitch * pitch;
-  const double thin_radius_tx = std::sqrt(options.max_hole_area_mm2 / kPi) / pitch;
-  auto comp_rect = [&](int k) {
-    cv::Rect rect(comp_stats.at<int>(k, cv::CC_STAT_LEFT) - 1,
-                  comp_stats.at<int>(k, cv::CC_STAT_TOP) - 1,
-                  comp_stats.at<int>(k, cv::CC_STAT_WIDTH) + 2,
-                  comp_stats.at<int>(k, cv::CC_STAT_HEIGHT) + 2);
-    return rect & cv::Rect(0, 0, w, h);
-  };
-  // Per component: 1 = small (all kFilled), 0 = has large-hole texels (see `large`).
-  std::vector<uint8_t> comp_filled(static_cast<size_t>(std::max(ncomp, 1)), 1);
-  bool any_large_component = false;
-  for (int k = 1; k < ncomp; ++k)
-    if (comp_stats.at<int>(k, cv::CC_STAT_AREA) * texel_area > options.max_hole_area_mm2)
-      any_large_component = true;
-  cv::Mat large;  // 255: texel of a large hole
-  if (any_large_component) {
-    cv::Mat distance, core;
-    cv::distanceTransform(~covered, distance, cv::DIST_L2, cv::DIST_MASK_3, CV_32F);
-    cv::compare(distance, thin_radius_tx, core, cv::CMP_GT);
-    cv::bitwise_and(core, holes, core);
-    // Cores only in components larger than the area limit.
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& r) {
-      for (int y = r.begin(); y < r.end(); ++y) {
-        const int* lab = labels.ptr<int>(y);
-        uint8_t* c = core.ptr<uint8_t>(y);
-        for (int x = 0; x < w; ++x)
-          if (c[x] && comp_stats.at<int>(lab[x], cv::CC_STAT_AREA) * texel_area <=
-                          options.max_hole_area_mm2)
-            c[x] = 0;
-      }
-    });
-    if (cv::countNonZero(core) > 0) {
-      cv::distanceTransform(~core, distance, cv::DIST_L2, cv::DIST_MASK_3, CV_32F);
-      cv::compare(distance, thin_radius_tx + 0.5, large, cv::CMP_LE);
-      cv::bitwise_and(large, holes, large);
-      for (int y = 0; y < h; ++y) {
-        const int* lab = labels.ptr<int>(y);
-        const uint8_t* l = large.ptr<uint8_t>(y);
-        for (int x = 0; x < w; ++x)
-          if (l[x]) comp_filled[static_cast<size_t>(lab[x])] = 0;
-      }
-    }
-  }
-  holes.release();
-  size_t holes_filled = 0, holes_unfilled = 0;
-  for (int k = 1; k < ncomp; ++k)
-    (comp_filled[static_cast<size_t>(k)] ? holes_filled : holes_unfilled)++;
-  tbb::enumerable_thread_specific<FillScratch> scratch;
-  tbb::parallel_for(
-      tbb::blocked_range<int>(1, std::max(ncomp, 1), 64), [&](const tbb::blocked_range<int>& r) {
-        FillScratch& s = scratch.local();
-        for (int k = r.begin(); k < r.end(); ++k) {
-          const cv::Rect rect = comp_rect(k);
-          const int iters =
-              comp_filled[static_cast<size_t>(k)]
-                  ? std::min(kMaxRelaxIterations, 4 * std::max(rect.width, rect.height))
-                  : kUnfilledRelaxIterations;
-          FillHole(rect, k, labels, covered, out, w, iters, s);
-        }
-      });
-
-  // ---- 5. States; outside texels at height 0; never NaN.
-  struct StateCounts {
-    size_t measured = 0, filled = 0, unfilled = 0, outside = 0;
-  };
-  const StateCounts sc = tbb::parallel_reduce(
-      tbb::blocked_range<int>(0, h), StateCounts{},
-      [&](const tbb::blocked_range<int>& rows, StateCounts c) {
-        for (int y = rows.begin(); y < rows.end(); ++y) {
-          const uint8_t* cov = covered.ptr<uint8_t>(y);
-          const uint8_t* ins = inside.ptr<uint8_t>(y);
-          const int* lab = labels.ptr<int>(y);
-          const uint8_t* large_row = large.empty() ? nullptr : large.ptr<uint8_t>(y);
-          float* hrow = field.height_mm.Row(y);
-          TexelState* st = field.state.Row(y);
-          for (int x = 0; x < w; ++x) {
-            if (cov[x]) {
-              st[x] = TexelState::kMeasured;
-              ++c.measured;
-            } else if (ins[x] && lab[x] > 0) {
-              const bool small = large_row == nullptr || !large_row[x];
-              st[x] = small ? TexelState::kFilled : TexelState::kUnfilled;
-              ++(small ? c.filled : c.unfilled);
-            } else {
-              st[x] = TexelState::kOutside;
-              hrow[x] = 0;
-              ++c.outside;
-            }
-            if (!std::isfinite(hrow[x])) hrow[x] = 0;  // defensive: inputs were finite
-          }
-        }
-        return c;
-      },
-      [](StateCounts a, const StateCounts& b) {
-        a.measured += b.measured;
-        a.filled += b.filled;
-        a.unfilled += b.unfilled;
-        a.outside += b.outside;
-        return a;
-      });
+  HoleMap holes = resample_detail::FindHoles(covered, &footprint);
+  const HoleSizes sizes = resample_detail::SplitLargeHoles(holes, plan.pitch, options);
+  holes.holes.release();
+  resample_detail::FillHoles(holes, sizes, out);
+  const StateCounts sc = resample_detail::AssignStates(holes, sizes.large, &field);
   if (stats) {
     stats->texels = static_cast<size_t>(w) * h;
     stats->measured = sc.measured;
     stats->filled = sc.filled;
     stats->unfilled = sc.unfilled;
     stats->outside = sc.outside;
-    stats->holes_filled = holes_filled;
-    stats->holes_unfilled = holes_unfilled;
+    stats->holes_filled = sizes.holes_filled;
+    stats->holes_unfilled = sizes.holes_unfilled;
     stats->triangles_drawn = counts.drawn;
     stats->triangles_skipped = counts.skipped;
   }
+  return field;
   return field;
 }
 

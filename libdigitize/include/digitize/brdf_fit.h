@@ -1,6 +1,7 @@
-// Per-texel one-lobe Lafortune fit (SPEC step 6; issue 3 section 2 "Fit").
+// Per-texel one-lobe Lafortune fit (after McAllister et al. 2002, as in the paper;
+// docs/architecture.md, "Fitting reflectance from photos").
 //
-// Layer: brdf (depends on core and lafortune.h). Ceres stays inside brdf_fit.cpp.
+// Layer: brdf (depends on core and lafortune.h). Ceres stays inside brdf_fit_ceres.cpp.
 //
 // WHAT IS FITTED. Each sample is one photo's view of one texel: the local view and light
 // directions, the observed linear radiance, and the irradiance factor E that multiplies the BRDF

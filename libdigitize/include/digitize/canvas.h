@@ -1,4 +1,4 @@
-// Canvas extraction (SPEC steps 1-2; paper 4.2): find the canvas in a scan of a framed painting
+// Canvas extraction (paper section 4.2): find the canvas in a scan of a framed painting
 // and the rigid transform into the canvas frame (see height_field.h for that frame).
 //
 // Steps: PCA plane of all valid points -> heights along its normal -> Sobel magnitude -> region
@@ -37,17 +37,17 @@ struct CanvasOptions {
 };
 
 struct CanvasResult {
-  Grid<uint8_t> mask_scan;         // per scan pixel: 1 = canvas (holes inside included), 0 = not
-  RigidTransform canvas_from_scan; // scan frame -> canvas frame (height_field.h)
+  Grid<uint8_t> mask_scan;          // per scan pixel: 1 = canvas (holes inside included), 0 = not
+  RigidTransform canvas_from_scan;  // scan frame -> canvas frame (height_field.h)
   Eigen::Vector2d extent_mm{0, 0};  // visible canvas in its plane (X, Y): the outline rectangle
                                     // (else the mask points' bounding rectangle)
-  double plane_rms_mm = 0;         // RMS distance of the trimmed canvas points to the plane
-  double noise_sigma_mm = 0;       // robust estimate of the scan noise on the canvas
-  size_t grown_px = 0;             // region after growing
-  size_t islands_filled_px = 0;    // enclosed pixels added back
-  size_t refined_px = 0;           // pixels added by the boundary refinement
-  size_t plane_points = 0;         // points used by the final plane fit
-  int seed_x = 0, seed_y = 0;      // seed actually used
+  double plane_rms_mm = 0;          // RMS distance of the trimmed canvas points to the plane
+  double noise_sigma_mm = 0;        // robust estimate of the scan noise on the canvas
+  size_t grown_px = 0;              // region after growing
+  size_t islands_filled_px = 0;     // enclosed pixels added back
+  size_t refined_px = 0;            // pixels added by the boundary refinement
+  size_t plane_points = 0;          // points used by the final plane fit
+  int seed_x = 0, seed_y = 0;       // seed actually used
   // Outline (step 5b): the visible canvas as a rectangle in the plane gave the in-plane axes,
   // the extent and the mask (false: the grown region and PCA axes were kept; why in the note).
   bool outline_fitted = false;
@@ -64,7 +64,7 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
 // smallest eigenvalue, oriented to have a negative Z (towards a scanner looking along +Z).
 struct PlaneFit {
   Vec3d centroid = Vec3d::Zero();
-  Mat3d axes = Mat3d::Identity();  // columns: major in-plane, minor in-plane, normal
+  Mat3d axes = Mat3d::Identity();     // columns: major in-plane, minor in-plane, normal
   Vec3d eigenvalues = Vec3d::Zero();  // descending
   size_t count = 0;
 };

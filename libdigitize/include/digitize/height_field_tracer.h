@@ -1,4 +1,4 @@
-// Ray queries against a canvas height field with Embree (issue 3: shadow and visibility rays of
+// Ray queries against a canvas height field with Embree (the shadow and visibility rays of
 // the reflectance samples; relighting renders; later the viewer's ground-truth reference).
 //
 // Layer: samples (core + height_field.h). Embree stays in height_field_tracer.cpp.

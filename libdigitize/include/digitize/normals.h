@@ -1,5 +1,5 @@
-// Per-texel normals (SPEC step 4): the area-weighted mean of the normals of the 8 triangles that
-// the texel forms with its 8-neighbourhood. Canvas frame, unit length, n_z > 0.
+// Per-texel normals (paper section 5): the area-weighted mean of the normals of the 8 triangles
+// that the texel forms with its 8-neighbourhood. Canvas frame, unit length, n_z > 0.
 #pragma once
 
 #include "digitize/height_field.h"

@@ -1,6 +1,6 @@
-// Reflectance samples (SPEC step 5; issue 3 section 2 "Samples" and "Rejection"): every canvas
-// texel projected into every photo, with its local view and light directions, its colour and the
-// light's irradiance -- the input of the per-texel BRDF fit (brdf_fit.h).
+// Reflectance samples (paper section 5; docs/architecture.md, "Fitting reflectance from photos"):
+// every canvas texel projected into every photo, with its local view and light directions, its
+// colour and the light's irradiance -- the input of the per-texel BRDF fit (brdf_fit.h).
 //
 // Layer: samples (core, photo_set.h, brdf_fit.h, height_field_tracer.h, tangent_frame.h).
 //

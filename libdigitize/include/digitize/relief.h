@@ -1,4 +1,4 @@
-// Relief classification (SPEC step 3; paper 4.3): significant relief -> boxes.
+// Relief classification (paper section 4.3): significant relief -> boxes.
 #pragma once
 
 #include <vector>

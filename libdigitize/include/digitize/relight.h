@@ -1,7 +1,7 @@
 // Relighting: renders a canvas with its reflectance maps under a given camera and light, by ray
 // tracing the height field (HeightFieldTracer) -- what the held-out evaluation of `digitize fit`
-// compares with real (or ground-truth) photographs, and the Embree reference the viewer (issue 5)
-// will be measured against.
+// compares with real (or ground-truth) photographs, and the Embree reference the viewer (viewer/)
+// is measured against.
 //
 // Layer: samples (core, photo_set.h, reflectance_maps.h, height_field_tracer.h, tangent_frame.h).
 //

@@ -1,9 +1,9 @@
-// Resampling of the canvas part of a scan onto a regular grid in the canvas frame (SPEC step 2,
-// end). The scan's own pixel grid is triangulated (two triangles per quad of valid canvas
-// samples, none across a height step) and every triangle is rasterised into the canvas grid with
-// linear interpolation; where triangles overlap, the highest wins (a height field is seen from
-// above). Texels no triangle covers are holes: small ones are inpainted (TexelState::kFilled),
-// larger ones inpainted for continuity but marked kUnfilled.
+// Resampling of the canvas part of a scan onto a regular grid in the canvas frame (paper section
+// 4.2, end; docs/architecture.md, step 7). The scan's own pixel grid is triangulated (two triangles
+// per quad of valid canvas samples, none across a height step) and every triangle is rasterised
+// into the canvas grid with linear interpolation; where triangles overlap, the highest wins (a
+// height field is seen from above). Texels no triangle covers are holes: small ones are inpainted
+// (TexelState::kFilled), larger ones inpainted for continuity but marked kUnfilled.
 #pragma once
 
 #include "digitize/canvas.h"
@@ -13,11 +13,11 @@
 namespace digitize {
 
 struct ResampleOptions {
-  double pitch_mm = 0;            // output texel spacing; 0 = the median scan sample spacing
-  double max_edge_factor = 4.0;   // triangles with an edge longer than this many pitches (in 3D)
-                                  // span a step or a gap and are not drawn
-  double max_hole_area_mm2 = 4.0; // holes up to this area are filled and reported; larger stay
-                                  // kUnfilled
+  double pitch_mm = 0;              // output texel spacing; 0 = the median scan sample spacing
+  double max_edge_factor = 4.0;     // triangles with an edge longer than this many pitches (in 3D)
+                                    // span a step or a gap and are not drawn
+  double max_hole_area_mm2 = 4.0;   // holes up to this area are filled and reported; larger stay
+                                    // kUnfilled
   int max_texels_per_side = 16384;  // refuse absurd grids (pitch too small for the canvas)
   Status Validate() const;
 };

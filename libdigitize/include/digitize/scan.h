@@ -1,36 +1,28 @@
-// Scans: one structured-light / laser capture as a grid of 3D points, and the clean-up that runs
-// before any geometry is estimated from it.
-//
-// Scan frame (mm): the scanner's own frame. For a pinhole scanner the centre of projection is the
-// origin and it looks along +Z, image x along +X, image y (rows, downwards) along +Y. An
-// orthographic scanner looks along +Z too. Missing samples are NaN.
+// Scans: the clean-up that runs on a capture (scan_data.h: the Scan, its frame) before any
+// geometry is estimated from it, and the merging of exposures of one pose.
 #pragma once
 
-#include <string>
 #include <vector>
 
 #include "digitize/core.h"
+#include "digitize/scan_data.h"
 
 namespace digitize {
 
-struct Scan {
-  Grid<Vec3f> xyz_mm;  // per scan pixel, scan frame; NaN = missing
-  std::string source;  // where it came from, for messages ("scan_a.exr")
-};
-
 struct SanitizeOptions {
-  double max_abs_coordinate_mm = 1e6;  // larger |x|,|y|,|z| are sensor garbage (1e30, Inf) -> missing
+  // larger |x|,|y|,|z| are sensor garbage (1e30, Inf) -> missing
+  double max_abs_coordinate_mm = 1e6;
   double spike_mm = 1.0;  // a sample farther than this from ALL its valid 8-neighbours (along the
                           // viewing axis) is an isolated outlier -> missing
   Status Validate() const;
 };
 
 struct SanitizeStats {
-  size_t total = 0;         // samples in the grid
-  size_t missing = 0;       // NaN on input
-  size_t non_finite = 0;    // Inf or beyond max_abs_coordinate_mm, set missing
-  size_t spikes = 0;        // isolated outliers, set missing
-  size_t valid = 0;         // what is left
+  size_t total = 0;       // samples in the grid
+  size_t missing = 0;     // NaN on input
+  size_t non_finite = 0;  // Inf or beyond max_abs_coordinate_mm, set missing
+  size_t spikes = 0;      // isolated outliers, set missing
+  size_t valid = 0;       // what is left
 };
 
 // Replaces non-finite, absurd and isolated-spike samples by NaN in place. Never fails.

@@ -1,6 +1,7 @@
-// Reading and writing scans in the formats users have (SPEC "Inputs users already have"):
+// Reading and writing scans in the formats users have (docs/formats.md, "Scans"):
 //   - float EXR / TIFF, 3 channels: X, Y, Z in mm (scan frame);
-//   - float EXR / TIFF, 1 channel: depth (Z, mm) on a regular grid of pixel_pitch_mm (orthographic);
+//   - float EXR / TIFF, 1 channel: depth (Z, mm) on a regular grid of pixel_pitch_mm
+//     (orthographic);
 //   - 16-bit PNG / TIFF, 1 channel: depth = value * height_scale_mm (+ height_offset_mm), value 0 =
 //     missing, on a regular grid of pixel_pitch_mm;
 //   - PLY point grids (OpenMesh): vertices in row-major order with "width"/"height" given in a
@@ -12,16 +13,16 @@
 #include <string>
 
 #include "digitize/core.h"
-#include "digitize/scan.h"
+#include "digitize/scan_data.h"
 
 namespace digitize {
 
 struct ScanReadOptions {
-  double pixel_pitch_mm = 0;     // needed for depth-only inputs (1 channel); 0 = refuse them
-  double height_scale_mm = 0;    // needed for 16-bit integer inputs: mm per count; 0 = refuse
-  double height_offset_mm = 0;   // added after scaling
-  std::filesystem::path mask;    // optional mask image, same size as the scan
-  int grid_width = 0, grid_height = 0;  // PLY without a "comment grid" line
+  double pixel_pitch_mm = 0;    // needed for depth-only inputs (1 channel); 0 = refuse them
+  double height_scale_mm = 0;   // needed for 16-bit integer inputs: mm per count; 0 = refuse
+  double height_offset_mm = 0;  // added after scaling
+  std::filesystem::path mask;   // optional mask image, same size as the scan
+  int grid_width = 0, grid_height = 0;   // PLY without a "comment grid" line
   size_t max_samples = size_t{1} << 27;  // refuse larger grids (a corrupt header, not a scan)
   Status Validate() const;
 };

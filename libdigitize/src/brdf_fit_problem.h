@@ -1,0 +1,329 @@
+// The one-lobe Lafortune fit of one texel as both solvers see it: the texel's valid samples as
+// arrays, the closed-form linear solve for a fixed lobe shape, the cost and its priors.
+// Private to the BRDF layer (brdf_fit.cpp, brdf_fit_varpro.cpp, brdf_fit_ceres.cpp).
+//
+// Notation inside: per texel, N valid samples; per sample s the products ax = vx lx, ay = vy ly,
+// az = vz lz (the lobe base is cx ax + cy ay + az), per channel c the irradiance e_c and the
+// radiance L_c. For a lobe shape theta = (cx, cy, t = log k) the lobe factor is g_s; the model is
+// e_c (a_c + b_c g) with a = rho_d, b = rho_s. The objective, identical on both paths, is
+//   F = sum_{s,c} (e_c (a_c + b_c g_s) - L_c)^2 + w2 ((cx + 1)^2 + (cy + 1)^2),
+// w2 = lobe_prior_weight^2 * N * (mean L^2): the prior (see brdf_fit.h).
+#pragma once
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <span>
+#include <vector>
+
+#include "digitize/brdf_fit.h"
+#include "digitize/lafortune.h"
+
+namespace digitize::brdf_detail {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kPriorC = -1.0;  // the mirror lobe (cx = cy = -1) the prior pulls towards
+// Lobe exponents (k log base) below this give g = 0 (see SetExponent); kLogZero marks a clamped
+// base: times any k >= 0.5 it is far below kMinLobeLog, and finite.
+constexpr float kMinLobeLog = -40.0f;
+constexpr float kLogZero = -1e30f;
+
+using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
+
+// Per-thread storage for one texel's samples as arrays (structure of arrays, so Eigen
+// vectorises every pass over the samples, exp and log included). Capacity grows, never shrinks.
+class Workspace {
+ public:
+  static constexpr int kArrays = 26;
+  float* Reserve(int n) {
+    if (n > capacity_) {
+      capacity_ = std::max(n, 2 * capacity_);
+      storage_.assign(static_cast<size_t>(capacity_) * kArrays, 0.0f);
+    }
+    return storage_.data();
+  }
+  int capacity() const { return capacity_; }
+
+ private:
+  std::vector<float> storage_;
+  int capacity_ = 0;
+};
+
+// Closed-form least squares of one channel for a fixed lobe: min over a >= 0, 0 <= b <= b_max
+// of sum (e (a + b g) - L)^2, from the sums s0 = sum e^2, s1 = sum e^2 g, s2 = sum e^2 g^2,
+// p0 = sum e L, p1 = sum e L g (ll = sum L^2 only for reporting costs).
+struct ChannelSums {
+  double s0 = 0, s1 = 0, s2 = 0, p0 = 0, p1 = 0, ll = 0;
+};
+struct ChannelFit {
+  double a = 0, b = 0;
+  bool b_at_max = false;  // b sits on the energy bound b_max(k)
+};
+
+// Cost from the sums, up to the constant ll (exact enough to compare candidates; the grid adds ll).
+inline double QuadraticCost(const ChannelSums& m, double a, double b) {
+  return -2.0 * (a * m.p0 + b * m.p1) + a * a * m.s0 + 2.0 * a * b * m.s1 + b * b * m.s2;
+}
+
+inline ChannelFit SolveChannel(const ChannelSums& m, double b_max) {
+  const double det = m.s0 * m.s2 - m.s1 * m.s1;
+  // Interior solution when the 2x2 system is well conditioned (the lobe column is not a
+  // multiple of the diffuse one) and it is feasible.
+  if (det > 1e-9 * m.s0 * m.s2 && det > 0.0) {
+    const double a = (m.s2 * m.p0 - m.s1 * m.p1) / det;
+    const double b = (m.s0 * m.p1 - m.s1 * m.p0) / det;
+    if (a >= 0.0 && b >= 0.0 && b <= b_max) return {a, b, false};
+  }
+  // Otherwise the optimum lies on an edge of the feasible box (the objective is convex): the
+  // best of each edge's clamped 1-D optimum. Ties (collinear columns) go to diffuse only.
+  const double a_only = m.s0 > 0.0 ? std::max(0.0, m.p0 / m.s0) : 0.0;
+  const double b_only = m.s2 > 0.0 ? std::clamp(m.p1 / m.s2, 0.0, b_max) : 0.0;
+  const double a_at_max = m.s0 > 0.0 ? std::max(0.0, (m.p0 - b_max * m.s1) / m.s0) : 0.0;
+  ChannelFit best{a_only, 0.0, false};
+  double best_cost = QuadraticCost(m, a_only, 0.0);
+  const double slack = 1e-12 * (std::abs(best_cost) + m.ll);
+  if (const double c = QuadraticCost(m, 0.0, b_only); c < best_cost - slack) {
+    best = {0.0, b_only, b_only >= b_max};
+    best_cost = c;
+  }
+  if (b_max > 0.0)
+    if (const double c = QuadraticCost(m, a_at_max, b_max); c < best_cost - slack)
+      best = {a_at_max, b_max, true};
+  return best;
+}
+
+struct Shape {
+  double cx = kPriorC, cy = kPriorC, t = 0;  // t = log k
+};
+
+struct LinearFit {
+  std::array<ChannelFit, 3> channel;
+  bool any_lobe() const { return channel[0].b > 0 || channel[1].b > 0 || channel[2].b > 0; }
+};
+
+// One texel's valid samples and the kernels both paths share. Arrays live in the workspace
+// (slots below), padded with zero samples to a multiple of kBlock: a zero irradiance and zero
+// direction products make a padded sample contribute exactly 0 to every sum, so the kernels run
+// whole blocks of 8 floats that Eigen maps onto SIMD registers, several sums per pass.
+class TexelProblem {
+ public:
+  static constexpr int kBlock = 8;
+  using Block = Eigen::Array<float, kBlock, 1>;
+
+  TexelProblem(std::span<const BrdfSample> samples, const BrdfFitOptions& options, Workspace& ws) {
+    const int padded_max = static_cast<int>((samples.size() + kBlock - 1) / kBlock * kBlock);
+    p_ = ws.Reserve(std::max(kBlock, padded_max));
+    cap_ = ws.capacity();
+    const double saturation = options.saturation_radiance;
+    for (const BrdfSample& s : samples) {
+      if (!(s.view_dir.allFinite() && s.light_dir.allFinite() && s.radiance.allFinite() &&
+            s.irradiance.allFinite()))
+        continue;
+      if ((s.irradiance.array() < 0.0f).any() || !(s.irradiance.maxCoeff() > 0.0f)) continue;
+      Vec3f v = s.view_dir, l = s.light_dir;
+      // Tolerate slightly non-unit input (the lobe is not scale invariant); the check first
+      // because two divisions per sample are a visible part of a 5 us fit.
+      const float vn2 = v.squaredNorm(), ln2 = l.squaredNorm();
+      if (!(vn2 > 0.0f && ln2 > 0.0f)) continue;
+      if (std::abs(vn2 - 1.0f) > 1e-6f) v /= std::sqrt(vn2);
+      if (std::abs(ln2 - 1.0f) > 1e-6f) l /= std::sqrt(ln2);
+      if (!(v.z() > 0.0f && l.z() > 0.0f)) continue;
+      if (s.radiance.maxCoeff() >= saturation) {
+        ++saturated_;
+        continue;
+      }
+      const int i = n_++;
+      Slot(kAx)[i] = v.x() * l.x();
+      Slot(kAy)[i] = v.y() * l.y();
+      Slot(kAz)[i] = v.z() * l.z();
+      for (int c = 0; c < 3; ++c) {
+        Slot(kE + c)[i] = s.irradiance[c];
+        Slot(kL + c)[i] = s.radiance[c];
+      }
+    }
+    np_ = std::max(kBlock, (n_ + kBlock - 1) / kBlock * kBlock);
+    for (int slot = kAx; slot < kE2; ++slot) std::fill(Slot(slot) + n_, Slot(slot) + np_, 0.0f);
+    for (int c = 0; c < 3; ++c) {
+      e2(c) = e(c).square();
+      el(c) = e(c) * L(c);
+      sums_[c].s0 = e2(c).sum();
+      sums_[c].p0 = el(c).sum();
+      sums_[c].ll = L(c).square().sum();
+    }
+    const double mean_square =
+        n_ > 0 ? (sums_[0].ll + sums_[1].ll + sums_[2].ll) / (3.0 * n_) : 0.0;
+    prior_w2_ = options.lobe_prior_weight * options.lobe_prior_weight * n_ * mean_square;
+    max_specular_albedo_ = options.max_specular_albedo;
+    // w sigma^2 per (specular albedo / 0.1)^2 per channel; see brdf_fit.h.
+    albedo_ridge_ =
+        options.specular_prior_weight * options.noise_sigma * options.noise_sigma / (0.1 * 0.1);
+  }
+
+  int n() const { return n_; }
+  int saturated() const { return saturated_; }
+  double prior_w2() const { return prior_w2_; }
+  double albedo_ridge() const { return albedo_ridge_; }
+  // The per-sample data as the reference path's cost functors take it.
+  Vec3f Products(int i) const { return {Slot(kAx)[i], Slot(kAy)[i], Slot(kAz)[i]}; }
+  Vec3f Irradiance(int i) const { return {Slot(kE)[i], Slot(kE + 1)[i], Slot(kE + 2)[i]}; }
+  Vec3f Radiance(int i) const { return {Slot(kL)[i], Slot(kL + 1)[i], Slot(kL + 2)[i]}; }
+
+  // rho_d only, per channel a = max(0, p0 / s0); returns the squared error.
+  double FitDiffuse(LinearFit* fit) {
+    double sse = 0;
+    for (int c = 0; c < 3; ++c) {
+      fit->channel[c] = {sums_[c].s0 > 0.0 ? std::max(0.0, sums_[c].p0 / sums_[c].s0) : 0.0, 0.0};
+      sse += (e(c) * static_cast<float>(fit->channel[c].a) - L(c)).square().sum();
+    }
+    return sse;
+  }
+
+  // The base for (cx, cy), clamped below at kLobeBaseEps, and its log, kLogZero where the base
+  // is clamped (so the lobe there comes out exactly 0 for every k).
+  void SetLobeDirection(double cx, double cy) {
+    base() = (static_cast<float>(cx) * View(kAx) + static_cast<float>(cy) * View(kAy) + View(kAz));
+    log_base() = (base() > kLobeBaseEps).select(base().max(kLobeBaseEps).log(), kLogZero);
+    base() = base().max(kLobeBaseEps);
+  }
+  // g (and dg/dcx, dg/dcy, dg/dt with t = log k) for the direction set last. The exponent is
+  // <= 0 here up to rounding (|cx|, |cy| <= 1 keeps the base <= 1). Lobe values below
+  // exp(kMinLobeLog) ~ 4e-18 of the peak are set to 0: they change nothing, and left in, their
+  // squares and products are float denormals, which cost ~100 cycles each on x86 and made the
+  // whole fit several times slower.
+  void SetExponent(double k, bool derivatives) {
+    k_ = k;
+    const float kf = static_cast<float>(k);
+    tmp() = kf * log_base();
+    g() = (tmp() > kMinLobeLog).select(tmp().max(kMinLobeLog).min(kMaxLobeLog).exp(), 0.0f);
+    if (!derivatives) return;
+    tmp() = kf * g() / base();  // dg/dc = k g / base * dbase/dc
+    d(0) = tmp() * View(kAx);
+    d(1) = tmp() * View(kAy);
+    d(2) = kf * g() *
+           log_base().max(kMinLobeLog);  // dg/dt = k dg/dk = k g log(base); g = 0 where clamped
+  }
+  void SetShape(const Shape& s, bool derivatives) {
+    SetLobeDirection(s.cx, s.cy);
+    SetExponent(std::exp(s.t), derivatives);
+  }
+
+  // Energy bound on rho_s for the current k: the lobe's reflected fraction at normal view,
+  // rho_s * integral of z^k z over the hemisphere = rho_s 2 pi / (k + 2), at most A.
+  double BMax() const { return max_specular_albedo_ * (k_ + 2.0) / (2.0 * kPi); }
+  // Ridge on rho_s for exponent k: the albedo ridge on A = rho_s 2 pi / (k + 2), per rho_s^2.
+  double Ridge(double k) const {
+    const double to_albedo = 2.0 * kPi / (k + 2.0);
+    return albedo_ridge_ * to_albedo * to_albedo;
+  }
+  // Both priors: the lobe direction's and the specular albedo's.
+  double Penalty(const Shape& s, const LinearFit& fit) const {
+    double b2 = 0;
+    for (const ChannelFit& f : fit.channel) b2 += f.b * f.b;
+    return prior_w2_ * ((s.cx - kPriorC) * (s.cx - kPriorC) + (s.cy - kPriorC) * (s.cy - kPriorC)) +
+           Ridge(std::exp(s.t)) * b2;
+  }
+
+  // Variable projection: the best (a, b) per channel for the current g, and the sums it used
+  // (s2 including the ridge). One pass per channel for s1, s2, p1.
+  LinearFit SolveLinear(std::array<ChannelSums, 3>* sums_out = nullptr) {
+    LinearFit fit;
+    const float* g_ptr = Slot(kG);
+    for (int c = 0; c < 3; ++c) {
+      const float* e2_ptr = Slot(kE2 + c);
+      const float* el_ptr = Slot(kEL + c);
+      Block s1 = Block::Zero(), s2 = Block::Zero(), p1 = Block::Zero();
+      for (int i = 0; i < np_; i += kBlock) {
+        const Block g = Block::Map(g_ptr + i), w = Block::Map(e2_ptr + i) * g;
+        s1 += w;
+        s2 += w * g;
+        p1 += Block::Map(el_ptr + i) * g;
+      }
+      ChannelSums m = sums_[c];
+      m.s1 = s1.sum();
+      m.s2 =
+          s2.sum() + Ridge(k_);  // the ridge is one more (fake) residual sqrt(ridge) b per channel
+      m.p1 = p1.sum();
+      fit.channel[c] = SolveChannel(m, BMax());
+      if (sums_out) (*sums_out)[c] = m;
+    }
+    return fit;
+  }
+
+  // Exact squared error of the model for the current g (direct, no cancellation), one pass.
+  double Sse(const LinearFit& fit) {
+    const float* g_ptr = Slot(kG);
+    float a[3], b[3];
+    for (int c = 0; c < 3; ++c) {
+      a[c] = static_cast<float>(fit.channel[c].a);
+      b[c] = static_cast<float>(fit.channel[c].b);
+    }
+    Block acc = Block::Zero();
+    for (int i = 0; i < np_; i += kBlock) {
+      const Block g = Block::Map(g_ptr + i);
+      for (int c = 0; c < 3; ++c)
+        acc += (Block::Map(Slot(kE + c) + i) * (a[c] + b[c] * g) - Block::Map(Slot(kL + c) + i))
+                   .square();
+    }
+    return acc.sum();
+  }
+
+  // Gauss-Newton system of the reduced problem at the current g and derivatives (the
+  // variable-projection solver's; defined in brdf_fit_varpro.cpp).
+  void NormalEquations(const LinearFit& fit, const std::array<ChannelSums, 3>& sums,
+                       const Shape& shape, Eigen::Matrix3d* jtj, Eigen::Vector3d* jtr);
+
+ private:
+  // Workspace slots: sample data, then scratch.
+  enum : int {
+    kAx = 0,
+    kAy,
+    kAz,
+    kE,
+    kL = kE + 3,
+    kE2 = kL + 3,
+    kEL = kE2 + 3,
+    kLogBase = kEL + 3,
+    kG,
+    kD,
+    kBase = kD + 3,
+    kTmp,
+    kSlots
+  };
+  static_assert(kSlots <= Workspace::kArrays);
+  float* Slot(int i) { return p_ + static_cast<size_t>(i) * cap_; }
+  const float* Slot(int i) const { return p_ + static_cast<size_t>(i) * cap_; }
+  ArrayMap View(int i) { return ArrayMap(Slot(i), np_); }
+  ArrayMap e(int c) { return View(kE + c); }
+  ArrayMap L(int c) { return View(kL + c); }
+  ArrayMap e2(int c) { return View(kE2 + c); }
+  ArrayMap el(int c) { return View(kEL + c); }
+  ArrayMap log_base() { return View(kLogBase); }
+  ArrayMap g() { return View(kG); }
+  ArrayMap d(int j) { return View(kD + j); }  // dg/dcx, dg/dcy, dg/dt
+  ArrayMap base() { return View(kBase); }
+  ArrayMap tmp() { return View(kTmp); }
+
+  float* p_ = nullptr;
+  int cap_ = 0;
+  int n_ = 0;   // valid samples
+  int np_ = 0;  // padded length of every array, a multiple of kBlock
+  int saturated_ = 0;
+  double prior_w2_ = 0;
+  double albedo_ridge_ = 0;
+  double max_specular_albedo_ = 1;
+  double k_ = 1;  // exponent of the current g
+  std::array<ChannelSums, 3> sums_;
+};
+
+struct Bounds {
+  double c_lo = -1.0, c_hi = 1.0, t_lo = 0, t_hi = 0;
+  Shape Clamp(Shape s) const {
+    s.cx = std::clamp(s.cx, c_lo, c_hi);
+    s.cy = std::clamp(s.cy, c_lo, c_hi);
+    s.t = std::clamp(s.t, t_lo, t_hi);
+    return s;
+  }
+};
+
+}  // namespace digitize::brdf_detail
