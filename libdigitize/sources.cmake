@@ -3,7 +3,7 @@
 # libdigitize/CMakeLists.txt (one target per layer) and tests/fuzz/CMakeLists.txt (which compiles
 # the parser layers again, instrumented).
 
-set(DIGITIZE_CORE_HEADERS core.h height_field.h)
+set(DIGITIZE_CORE_HEADERS core.h height_field.h scan_data.h)
 set(DIGITIZE_CORE_SOURCES)
 
 set(DIGITIZE_IO_HEADERS image_io.h scan_io.h output_dir.h)
@@ -11,13 +11,19 @@ set(DIGITIZE_IO_SOURCES
   image_io.cpp    # OpenImageIO
   output_dir.cpp
   scan_io.cpp     # OpenMesh (PLY)
+  json_fields.cpp # the one JSON field reader (private json_fields.h)
 )
 
 set(DIGITIZE_CANVAS_HEADERS scan.h canvas.h resample.h)
 set(DIGITIZE_CANVAS_SOURCES
   scan.cpp
-  canvas.cpp      # OpenCV calib3d (homography, minimum-area rectangle)
-  resample.cpp
+  canvas.cpp           # ExtractCanvas: the driver over the steps below
+  canvas_plane.cpp     # PCA and robust canvas plane, noise estimate
+  canvas_region.cpp    # region growing from a seed
+  canvas_boundary.cpp  # boundary refinement to the frame step
+  canvas_outline.cpp   # OpenCV calib3d (homography, minimum-area rectangle): the outline rectangle
+  resample.cpp         # ResampleToCanvasGrid: the driver and rasterisation
+  resample_holes.cpp   # hole filling, texel states
   mask_ops.cpp    # OpenCV morphology shared by canvas.cpp and resample.cpp
 )
 
@@ -34,14 +40,19 @@ set(DIGITIZE_PREPROCESS_SOURCES
 
 set(DIGITIZE_PHOTOS_HEADERS photo_set.h)
 set(DIGITIZE_PHOTOS_SOURCES
-  photo_set.cpp
+  photo_calibration.cpp  # calibration JSON: transforms, cameras, lights
+  rti_lp.cpp             # RTI .lp light files
+  photo_pixels.cpp       # image headers, pixels, colour
+  photo_checks.cpp       # camera, light and footprint checks
 )
 
 set(DIGITIZE_BRDF_HEADERS lafortune.h brdf_fit.h tangent_frame.h reflectance_maps.h)
 set(DIGITIZE_BRDF_SOURCES
   lafortune.cpp
   reflectance_maps.cpp
-  brdf_fit.cpp    # Ceres
+  brdf_fit.cpp         # front end: per-texel problem, solver choice, the tiled loop
+  brdf_fit_varpro.cpp  # the fast variable-projection solver
+  brdf_fit_ceres.cpp   # Ceres: the ceres::Solve reference (the one file that includes Ceres)
 )
 
 set(DIGITIZE_SAMPLES_HEADERS height_field_tracer.h relight.h reflectance_samples.h reflectance_fit.h)
