@@ -5,10 +5,12 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "digitize/image_io.h"
+#include "options_json.h"
 
 namespace digitize {
 namespace {
@@ -41,14 +43,51 @@ bool AllFinite(const Grid<T>& grid) {
   return true;
 }
 
-nlohmann::json TransformJson(const RigidTransform& t) {
+
+}  // namespace
+
+nlohmann::json ToJson(const RigidTransform& t) {
   nlohmann::json rotation = nlohmann::json::array();
   for (int r = 0; r < 3; ++r) rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
   return {{"rotation", rotation},
           {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
 }
 
-}  // namespace
+Result<RigidTransform> TransformFromJson(const nlohmann::json& json) {
+  if (!json.is_object()) return Error{"must be an object"};
+  // rows x cols numbers under `key` (cols 0: a list of `rows` numbers), row-major; extra entries
+  // are ignored.
+  auto numbers = [&](const char* key, int rows, int cols, double* out) -> Status {
+    const auto it = json.find(key);
+    if (it == json.end()) return Error{std::string(key) + " is missing"};
+    const Error bad{std::string(key) + " must be " + std::to_string(rows) +
+                    (cols > 0 ? " rows of " + std::to_string(cols) : std::string()) + " numbers"};
+    if (!it->is_array() || it->size() < static_cast<size_t>(rows)) return bad;
+    for (int r = 0; r < rows; ++r) {
+      const nlohmann::json& row = (*it)[r];
+      if (cols == 0) {
+        if (!row.is_number()) return bad;
+        out[r] = row.get<double>();
+        continue;
+      }
+      if (!row.is_array() || row.size() < static_cast<size_t>(cols)) return bad;
+      for (int c = 0; c < cols; ++c) {
+        if (!row[c].is_number()) return bad;
+        out[r * cols + c] = row[c].get<double>();
+      }
+    }
+    return Status::Ok();
+  };
+  double rotation[9], translation[3];
+  if (Status s = numbers("rotation", 3, 3, rotation); !s.ok()) return Error{s.message()};
+  if (Status s = numbers("translation_mm", 3, 0, translation); !s.ok()) return Error{s.message()};
+  RigidTransform t;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) t.rotation(r, c) = rotation[3 * r + c];
+    t.translation(r) = translation[r];
+  }
+  return t;
+}
 
 Status PreprocessOptions::Validate() const {
   for (const auto& [name, status] :
@@ -164,6 +203,32 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   return result;
 }
 
+nlohmann::json ToJson(const PreprocessOptions& options) {
+  return {{"sanitize",
+         {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
+          {"spike_mm", options.sanitize.spike_mm}}},
+        {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
+        {"canvas",
+         {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
+          {"stop_slope", options.canvas.stop_slope},
+          {"refine_step_mm", options.canvas.refine_step_mm},
+          {"refine_px", options.canvas.refine_px},
+          {"erode_px", options.canvas.erode_px},
+          {"trim_sigmas", options.canvas.trim_sigmas},
+          {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
+        {"resample",
+         {{"pitch_mm", options.resample.pitch_mm},
+          {"max_edge_factor", options.resample.max_edge_factor},
+          {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
+        {"relief",
+         {{"delta0_fraction", options.relief.delta0_fraction},
+          {"min_component_area_mm2", options.relief.min_component_area_mm2},
+          {"cell_px", options.relief.cell_px},
+          {"cover_px", options.relief.cover_px},
+          {"min_relief_mm", options.relief.min_relief_mm},
+          {"noise_margin_from_scan", options.noise_margin_from_scan}}}};
+}
+
 std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
                                  const std::vector<std::string>& inputs) {
   using nlohmann::json;
@@ -200,7 +265,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"outline_fitted", c.outline_fitted},
         {"outline_note", c.outline_note},
         {"hidden_edges", c.hidden_edges},
-        {"canvas_from_scan", TransformJson(c.canvas_from_scan)}}},
+        {"canvas_from_scan", ToJson(c.canvas_from_scan)}}},
       {"warnings", c.warnings},
       {"resample",
        {{"pitch_mm", result.field.pitch_mm},
@@ -221,30 +286,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"texels_above", result.relief.texels_above},
         {"components_kept", result.relief.components_kept},
         {"components_removed", result.relief.components_removed}}},
-      {"options",
-       {{"sanitize",
-         {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
-          {"spike_mm", options.sanitize.spike_mm}}},
-        {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
-        {"canvas",
-         {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
-          {"stop_slope", options.canvas.stop_slope},
-          {"refine_step_mm", options.canvas.refine_step_mm},
-          {"refine_px", options.canvas.refine_px},
-          {"erode_px", options.canvas.erode_px},
-          {"trim_sigmas", options.canvas.trim_sigmas},
-          {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
-        {"resample",
-         {{"pitch_mm", options.resample.pitch_mm},
-          {"max_edge_factor", options.resample.max_edge_factor},
-          {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
-        {"relief",
-         {{"delta0_fraction", options.relief.delta0_fraction},
-          {"min_component_area_mm2", options.relief.min_component_area_mm2},
-          {"cell_px", options.relief.cell_px},
-          {"cover_px", options.relief.cover_px},
-          {"min_relief_mm", options.relief.min_relief_mm},
-          {"noise_margin_from_scan", options.noise_margin_from_scan}}}}},
+      {"options", ToJson(options)},
   };
   return report.dump(2) + "\n";
 }
@@ -303,7 +345,7 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
 
   json transform = {{"format", "digitize.transform"},
                     {"version", 1},
-                    {"canvas_from_scan", TransformJson(result.canvas.canvas_from_scan)},
+                    {"canvas_from_scan", ToJson(result.canvas.canvas_from_scan)},
                     {"pitch_mm", f.pitch_mm},
                     {"size_texels", {f.width(), f.height()}},
                     {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
@@ -317,6 +359,53 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
 }  // namespace digitize
 
 namespace digitize {
+namespace {
+
+// A JSON object file of the given "format"; errors name the file.
+Result<nlohmann::json> ReadJsonObject(const std::filesystem::path& path, const char* format) {
+  std::ifstream file(path);
+  if (!file) return Error{path.string() + ": cannot open"};
+  std::stringstream text;
+  text << file.rdbuf();
+  nlohmann::json doc = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded()) return Error{path.string() + ": not JSON"};
+  if (!doc.is_object() || !doc.contains("format") || doc["format"] != format)
+    return Error{path.string() + ": not a " + format + " file"};
+  return doc;
+}
+
+// Members of a canvas folder's JSON files; each error names the file, the key path and the type
+// wanted ("c/boxes.json: boxes[3].x0 must be an integer").
+struct JsonFields {
+  std::string path;
+
+  static std::string Key(const std::string& at, const char* key) {
+    return at.empty() ? key : at + "." + key;
+  }
+  Result<const nlohmann::json*> Member(const nlohmann::json& object, const char* key,
+                                       const std::string& at = "") const {
+    const auto it = object.find(key);
+    if (it == object.end()) return Error{path + ": " + Key(at, key) + " is missing"};
+    return &*it;
+  }
+  Result<double> Number(const nlohmann::json& object, const char* key,
+                        const std::string& at = "") const {
+    auto v = Member(object, key, at);
+    if (!v.ok()) return v.error();
+    if (!(*v)->is_number()) return Error{path + ": " + Key(at, key) + " must be a number"};
+    return (*v)->get<double>();
+  }
+  Result<int> Int(const nlohmann::json& object, const char* key, const std::string& at = "") const {
+    auto v = Member(object, key, at);
+    if (!v.ok()) return v.error();
+    if (!(*v)->is_number_integer() || (*v)->get<int64_t>() < std::numeric_limits<int>::min() ||
+        (*v)->get<int64_t>() > std::numeric_limits<int>::max())
+      return Error{path + ": " + Key(at, key) + " must be an integer"};
+    return static_cast<int>((*v)->get<int64_t>());
+  }
+};
+
+}  // namespace
 
 Status CheckCanvasFolder(const std::filesystem::path& dir) {
   std::error_code ec;
@@ -385,63 +474,65 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
     out.normals.data[i] = n;
   }
 
-  const auto transform_path = dir / "transform.json";
-  std::ifstream file(transform_path);
-  if (!file) return Error{transform_path.string() + ": cannot open"};
-  std::stringstream text;
-  text << file.rdbuf();
-  try {
-    const nlohmann::json doc = nlohmann::json::parse(text.str());
-    if (doc.value("format", "") != "digitize.transform")
-      return Error{transform_path.string() + ": not a digitize.transform file"};
-    const double pitch = doc.at("pitch_mm").get<double>();
-    if (!(std::isfinite(pitch) && pitch > 0))
-      return Error{transform_path.string() + ": pitch_mm must be > 0, got " + FormatNumber(pitch)};
-    out.field.pitch_mm = pitch;
-    const auto& t = doc.at("canvas_from_scan");
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) out.canvas_from_scan.rotation(r, c) = t.at("rotation").at(r).at(c);
-    for (int r = 0; r < 3; ++r) out.canvas_from_scan.translation(r) = t.at("translation_mm").at(r);
-  } catch (const nlohmann::json::exception& e) {
-    return Error{transform_path.string() + ": " + e.what()};
-  }
+  using nlohmann::json;
+  auto transform = ReadJsonObject(dir / "transform.json", "digitize.transform");
+  if (!transform.ok()) return transform.error();
+  const JsonFields t{(dir / "transform.json").string()};
+  auto pitch = t.Number(*transform, "pitch_mm");
+  if (!pitch.ok()) return pitch.error();
+  if (!(std::isfinite(*pitch) && *pitch > 0))
+    return Error{t.path + ": pitch_mm must be > 0, got " + FormatNumber(*pitch)};
+  out.field.pitch_mm = *pitch;
+  auto pose = t.Member(*transform, "canvas_from_scan");
+  if (!pose.ok()) return pose.error();
+  auto pose_value = TransformFromJson(**pose);
+  if (!pose_value.ok()) return Error{t.path + ": canvas_from_scan." + pose_value.error().message};
+  out.canvas_from_scan = *pose_value;
   const Mat3d& R = out.canvas_from_scan.rotation;
   if (!R.allFinite() || !out.canvas_from_scan.translation.allFinite() ||
       (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
-    return Error{transform_path.string() + ": canvas_from_scan.rotation is not a rotation"};
+    return Error{t.path + ": canvas_from_scan.rotation is not a rotation"};
 
-  const auto boxes_path = dir / "boxes.json";
-  std::ifstream boxes_file(boxes_path);
-  if (!boxes_file) return Error{boxes_path.string() + ": cannot open"};
-  std::stringstream boxes_text;
-  boxes_text << boxes_file.rdbuf();
-  try {
-    const nlohmann::json doc = nlohmann::json::parse(boxes_text.str());
-    if (doc.value("format", "") != "digitize.boxes")
-      return Error{boxes_path.string() + ": not a digitize.boxes file"};
-    out.delta0_mm = doc.at("delta0_mm").get<double>();
-    out.max_height_mm = doc.at("max_height_mm").get<double>();
-    out.cell_px = doc.at("cell_px").get<int>();
-    if (!(std::isfinite(out.delta0_mm) && std::isfinite(out.max_height_mm) && out.cell_px >= 1))
-      return Error{boxes_path.string() + ": delta0_mm, max_height_mm must be finite, cell_px >= 1"};
-    for (const auto& b : doc.at("boxes")) {
-      ReliefBox box;
-      box.x0 = b.at("x0").get<int>();
-      box.y0 = b.at("y0").get<int>();
-      box.width = b.at("width").get<int>();
-      box.height = b.at("height").get<int>();
-      box.h_max_mm = b.at("h_max_mm").get<float>();
-      box.u_max = b.at("u_max").get<int>();
-      box.v_max = b.at("v_max").get<int>();
-      if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
-          int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
-          !std::isfinite(box.h_max_mm))
-        return Error{boxes_path.string() + ": box " + std::to_string(out.boxes.size()) +
-                     " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
-      out.boxes.push_back(box);
+  auto boxes_doc = ReadJsonObject(dir / "boxes.json", "digitize.boxes");
+  if (!boxes_doc.ok()) return boxes_doc.error();
+  const JsonFields bf{(dir / "boxes.json").string()};
+  auto delta0 = bf.Number(*boxes_doc, "delta0_mm");
+  if (!delta0.ok()) return delta0.error();
+  auto max_height = bf.Number(*boxes_doc, "max_height_mm");
+  if (!max_height.ok()) return max_height.error();
+  auto cell = bf.Int(*boxes_doc, "cell_px");
+  if (!cell.ok()) return cell.error();
+  out.delta0_mm = *delta0;
+  out.max_height_mm = *max_height;
+  out.cell_px = *cell;
+  if (!(std::isfinite(out.delta0_mm) && std::isfinite(out.max_height_mm) && out.cell_px >= 1))
+    return Error{bf.path + ": delta0_mm, max_height_mm must be finite, cell_px >= 1"};
+  auto boxes = bf.Member(*boxes_doc, "boxes");
+  if (!boxes.ok()) return boxes.error();
+  if (!(*boxes)->is_array()) return Error{bf.path + ": \"boxes\" must be an array"};
+  for (const json& b : **boxes) {
+    const std::string at = "boxes[" + std::to_string(out.boxes.size()) + "]";
+    if (!b.is_object()) return Error{bf.path + ": " + at + " must be an object"};
+    ReliefBox box;
+    for (auto [key, target] : {std::pair<const char*, int*>{"x0", &box.x0},
+                               {"y0", &box.y0},
+                               {"width", &box.width},
+                               {"height", &box.height},
+                               {"u_max", &box.u_max},
+                               {"v_max", &box.v_max}}) {
+      auto v = bf.Int(b, key, at);
+      if (!v.ok()) return v.error();
+      *target = *v;
     }
-  } catch (const nlohmann::json::exception& e) {
-    return Error{boxes_path.string() + ": " + e.what()};
+    auto h_max = bf.Number(b, "h_max_mm", at);
+    if (!h_max.ok()) return h_max.error();
+    box.h_max_mm = static_cast<float>(*h_max);
+    if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
+        int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
+        !std::isfinite(box.h_max_mm))
+      return Error{bf.path + ": box " + std::to_string(out.boxes.size()) +
+                   " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
+    out.boxes.push_back(box);
   }
   return out;
 }
