@@ -18,6 +18,7 @@
 #include <fstream>
 #include <mutex>
 #include <new>
+#include <sstream>
 #include <string>
 #include <system_error>
 
@@ -318,6 +319,24 @@ Status WriteTextFile(const fs::path& path, const std::string& text) {
     const int error = wrote == text.size() ? 0 : (errno != 0 ? errno : EIO);
     return FinishFile(file, temp, path, error, text.size());
   });
+}
+
+Result<std::string> ReadTextFile(const fs::path& path, const std::string& what,
+                                 uintmax_t max_bytes) {
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (!fs::exists(status)) return Error{path.string() + ": no such file"};
+  if (fs::is_directory(status)) return Error{path.string() + ": is a directory, not a " + what};
+  const uintmax_t bytes = fs::file_size(path, ec);
+  if (!ec && bytes > max_bytes) {
+    return Error{path.string() + ": " + std::to_string(bytes) + " bytes, too large for a " + what};
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Error{path.string() + ": cannot open for reading"};
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) return Error{path.string() + ": read failed"};
+  return text.str();
 }
 
 Status WriteFloatExr(const fs::path& path, const Grid<float>& image, const std::string& channel,

@@ -3,11 +3,13 @@
 // Layer: core (depends on nothing but Eigen and the standard library).
 #pragma once
 
+#include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <functional>
 #include <limits>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -160,11 +162,19 @@ inline double AngleDeg(const Vec3d& a, const Vec3d& b) {
   return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / 3.14159265358979323846;
 }
 
-// Shortest round-trip-ish text of a number for messages ("0.25", "1e+30", "nan").
-inline std::string FormatNumber(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
+// The toolkit's one number format, for messages and metadata: printf's %g with
+// `significant_digits` digits ("0.25", "1e+30", "nan"; 6 is what std::ostream prints), or, with
+// kRoundTripDigits, the shortest text that reads back as the same double (std::to_chars), for a
+// value a reader parses again.
+inline constexpr int kRoundTripDigits = -1;
+inline std::string FormatNumber(double v, int significant_digits = 6) {
+  char buf[40];
+  if (significant_digits == kRoundTripDigits) {
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+  }
+  const int n = std::snprintf(buf, sizeof buf, "%.*g", significant_digits, v);
+  return std::string(buf, std::min(static_cast<size_t>(n), sizeof buf - 1));
 }
 
 // ---------------------------------------------------------------------------------------------

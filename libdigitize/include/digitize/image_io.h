@@ -28,6 +28,13 @@ void RemoveStaleTemporaries(const std::filesystem::path& dir, const std::string&
 // disk is "PATH: write failed: no space left on device", and the previous file stays.
 Status WriteTextFile(const std::filesystem::path& path, const std::string& text);
 
+// Text files larger than this are not what the toolkit reads (a wrong file given).
+inline constexpr uintmax_t kMaxTextFileBytes = uintmax_t{64} << 20;
+// The whole file, as bytes. Errors name the file: "no such file", "is a directory, not a WHAT",
+// "N bytes, too large for a WHAT" (over max_bytes), "cannot open for reading", "read failed".
+Result<std::string> ReadTextFile(const std::filesystem::path& path, const std::string& what,
+                                 uintmax_t max_bytes = kMaxTextFileBytes);
+
 // A library's multi-line error text as one line ("; " between lines, no trailing newline), so
 // every message the toolkit prints stays one line.
 std::string OneLine(std::string text);

@@ -1,0 +1,331 @@
+// Pixels of a photo set as linear RGB (docs/formats.md, "Pixels: linearisation, NaN and
+// saturation"): the image headers checked against the cameras first (cheap), then every image
+// decoded, linearised and flagged, in parallel.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <mutex>
+#include <new>
+#include <string>
+#include <vector>
+
+#include "digitize/image_io.h"
+#include "digitize/photo_set.h"
+#include "photo_set_internal.h"
+
+namespace digitize {
+
+using namespace photo_detail;
+namespace fs = std::filesystem;
+
+namespace {
+
+double SrgbToLinearD(double c) {
+  const double a = std::abs(c);
+  const double linear = a <= 0.04045 ? a / 12.92 : std::pow((a + 0.055) / 1.055, 2.4);
+  return c < 0 ? -linear : linear;
+}
+
+// Linear value of every integer code, for 8-bit (256 entries) or 16-bit (65536) images.
+const std::vector<float>& SrgbLut(int max_code) {
+  static const auto make = [](int n) {
+    std::vector<float> lut(static_cast<size_t>(n) + 1);
+    for (int i = 0; i <= n; ++i) lut[i] = static_cast<float>(SrgbToLinearD(double(i) / n));
+    return lut;
+  };
+  static const std::vector<float> lut8 = make(255);
+  static const std::vector<float> lut16 = make(65535);
+  return max_code == 255 ? lut8 : lut16;
+}
+// code / max_code, for integer images declared linear.
+const std::vector<float>& LinearLut(int max_code) {
+  static const auto make = [](int n) {
+    std::vector<float> lut(static_cast<size_t>(n) + 1);
+    for (int i = 0; i <= n; ++i) lut[i] = static_cast<float>(double(i) / n);
+    return lut;
+  };
+  static const std::vector<float> lut8 = make(255);
+  static const std::vector<float> lut16 = make(65535);
+  return max_code == 255 ? lut8 : lut16;
+}
+
+// Decoded samples -> linear RGB + flags. Rows in parallel (nested inside the per-photo tasks,
+// which TBB composes) so that a single large photo also keeps every core busy.
+struct Converted {
+  Grid<Vec3f> rgb;
+  Grid<uint8_t> flags;
+  size_t non_finite = 0, saturated = 0;
+};
+
+struct RowCounts {
+  size_t non_finite = 0, saturated = 0;
+};
+
+// Integer samples: OpenImageIO hands them over as code / max_code; rounding recovers the code
+// exactly, and a table gives its linear value (sRGB EOTF or code / max_code).
+template <int C>
+RowCounts IntegerRow(const float* src, int w, float max_code, int sat_code, const float* lut,
+                     Vec3f* dst, uint8_t* flags) {
+  RowCounts n;
+  const int top = static_cast<int>(max_code);
+  for (int x = 0; x < w; ++x, src += C) {
+    int code[3];
+    for (int k = 0; k < C; ++k) code[k] = std::min(static_cast<int>(src[k] * max_code + 0.5f), top);
+    if constexpr (C == 1) code[1] = code[2] = code[0];
+    code[0] = std::max(code[0], 0), code[1] = std::max(code[1], 0), code[2] = std::max(code[2], 0);
+    dst[x] = Vec3f(lut[code[0]], lut[code[1]], lut[code[2]]);
+    if (std::max({code[0], code[1], code[2]}) >= sat_code) {
+      flags[x] = kPixelSaturated;
+      ++n.saturated;
+    }
+  }
+  return n;
+}
+
+// Float samples (EXR, float TIFF): finite check, optional sRGB curve, saturation level.
+template <int C>
+RowCounts FloatRow(const float* src, int w, bool srgb, float sat_level, Vec3f* dst,
+                   uint8_t* flags) {
+  RowCounts n;
+  for (int x = 0; x < w; ++x, src += C) {
+    Vec3f v =
+        C == 1 ? Vec3f::Constant(src[0]) : Vec3f(src[0], src[C > 1 ? 1 : 0], src[C > 2 ? 2 : 0]);
+    if (srgb) v = Vec3f(SrgbToLinear(v.x()), SrgbToLinear(v.y()), SrgbToLinear(v.z()));
+    if (!v.allFinite()) {
+      dst[x] = Vec3f::Zero();
+      flags[x] = kPixelNonFinite;
+      ++n.non_finite;
+      continue;
+    }
+    dst[x] = v;
+    if (v.maxCoeff() >= sat_level) {
+      flags[x] = kPixelSaturated;
+      ++n.saturated;
+    }
+  }
+  return n;
+}
+
+Converted Convert(const FloatImage& image, ColourEncoding encoding, const PhotoSetOptions& o) {
+  Converted out;
+  const int w = image.width, h = image.height, c = image.channels;
+  out.rgb.width = w;
+  out.rgb.height = h;
+  out.rgb.data.resize(static_cast<size_t>(w) * h);  // Eigen leaves it unset: written below
+  out.flags = Grid<uint8_t>(w, h, 0);
+  const bool srgb = encoding == ColourEncoding::kSrgb;
+  // 8-bit and 16-bit codes go through a table; deeper integers (rare) through the float path,
+  // which is exact for them too.
+  const int max_code = !image.integer_samples        ? 0
+                       : image.bits_per_sample <= 8  ? 255
+                       : image.bits_per_sample <= 16 ? 65535
+                                                     : 0;
+  const std::vector<float>* lut = max_code == 0 ? nullptr
+                                  : srgb        ? &SrgbLut(max_code)
+                                                : &LinearLut(max_code);
+  // The smallest code at or above the saturation threshold.
+  const int sat_code =
+      static_cast<int>(std::ceil(static_cast<double>(o.saturation_encoded) * max_code - 1e-9));
+  // Integer images beyond 16 bits: the threshold applies to the encoded value as for the others.
+  const float sat_level = image.integer_samples
+                              ? (srgb ? SrgbToLinear(o.saturation_encoded) : o.saturation_encoded)
+                              : o.float_saturation_level;
+
+  std::atomic<size_t> non_finite{0}, saturated{0};
+  tbb::parallel_for(tbb::blocked_range<int>(0, h, 16), [&](const tbb::blocked_range<int>& rows) {
+    RowCounts total;
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      const float* src = image.pixels.data() + static_cast<size_t>(y) * w * c;
+      Vec3f* dst = out.rgb.Row(y);
+      uint8_t* flags = out.flags.Row(y);
+      RowCounts n;
+      if (lut) {
+        n = c == 1 ? IntegerRow<1>(src, w, float(max_code), sat_code, lut->data(), dst, flags)
+                   : IntegerRow<3>(src, w, float(max_code), sat_code, lut->data(), dst, flags);
+      } else {
+        n = c == 1 ? FloatRow<1>(src, w, srgb, sat_level, dst, flags)
+                   : FloatRow<3>(src, w, srgb, sat_level, dst, flags);
+      }
+      total.non_finite += n.non_finite;
+      total.saturated += n.saturated;
+    }
+    non_finite += total.non_finite;
+    saturated += total.saturated;
+  });
+  out.non_finite = non_finite;
+  out.saturated = saturated;
+  if (out.non_finite == 0 && out.saturated == 0) out.flags = Grid<uint8_t>();
+  return out;
+}
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+}  // namespace
+
+Result<ImageHeader> photo_detail::ReadHeader(const fs::path& path) {
+  const std::string name = path.string();
+  auto read = ReadImageHeader(path);
+  if (!read.ok()) return read.error();
+  const ImageHeader header = *read;
+  if (header.channels != 1 && header.channels != 3 && header.channels != 4) {
+    return Error{name + ": " + std::to_string(header.channels) +
+                 " channels; photos must be 1-channel (grey), 3-channel (RGB) or RGBA"};
+  }
+  return header;
+}
+
+ColourEncoding photo_detail::Resolve(ColourEncoding declared, bool integer_samples) {
+  if (declared != ColourEncoding::kAuto) return declared;
+  return integer_samples ? ColourEncoding::kSrgb : ColourEncoding::kLinear;
+}
+
+namespace {
+
+// Checks the header of a photo's image against its camera and resolves its encoding.
+Status ProbePhoto(Photo& photo) {
+  auto header = ReadHeader(photo.path);
+  if (!header) return Error{photo.entry + ": " + header.error().message};
+  if (header->width != photo.camera.width || header->height != photo.camera.height) {
+    return Error{photo.entry + ": " + photo.path.string() + ": image is " +
+                 Size(header->width, header->height) + ", its camera says " +
+                 Size(photo.camera.width, photo.camera.height)};
+  }
+  photo.encoding = Resolve(photo.encoding, header->integer_samples);
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status photo_detail::ProbeAll(PhotoSet& set) {
+  for (Photo& photo : set.photos) {
+    if (Status s = ProbePhoto(photo); !s) return s;
+  }
+  return Status::Ok();
+}
+
+const char* ToString(ColourEncoding encoding) {
+  switch (encoding) {
+    case ColourEncoding::kSrgb:
+      return "srgb";
+    case ColourEncoding::kLinear:
+      return "linear";
+    case ColourEncoding::kAuto:
+      break;
+  }
+  return "auto";
+}
+
+float SrgbToLinear(float encoded) { return static_cast<float>(SrgbToLinearD(encoded)); }
+
+std::string PhotoLoadSummary::Brief() const {
+  char buf[256];
+  const double mpx = pixels / 1e6;
+  const double sat_pct = pixels ? 100.0 * saturated_pixels / pixels : 0.0;
+  std::snprintf(buf, sizeof buf,
+                "%d photos (%d sRGB, %d linear), %.1f Mpx, %zu NaN/Inf px, %zu saturated px "
+                "(%.2f %%); %.2f s",
+                photos_loaded, srgb_photos, linear_photos, mpx, non_finite_pixels, saturated_pixels,
+                sat_pct, seconds);
+  return buf;
+}
+
+Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
+  if (Status s = options.Validate(); !s) return s;
+  auto image = ReadImage(photo.path, options.max_pixels_per_image);
+  if (!image) return Error{photo.entry + ": " + image.error().message};
+  if (image->width != photo.camera.width || image->height != photo.camera.height) {
+    return Error{photo.entry + ": " + photo.path.string() + ": image is " +
+                 Size(image->width, image->height) + ", its camera says " +
+                 Size(photo.camera.width, photo.camera.height)};
+  }
+  if (image->channels == 4) {
+    // RGBA (a PNG saved with alpha): the colour is what was photographed; alpha is dropped.
+    float* p = image->pixels.data();
+    const size_t n = static_cast<size_t>(image->width) * static_cast<size_t>(image->height);
+    for (size_t i = 0; i < n; ++i)
+      for (int c = 0; c < 3; ++c) p[i * 3 + c] = p[i * 4 + c];
+    image->pixels.resize(n * 3);
+    image->channels = 3;
+  }
+  if (image->channels != 1 && image->channels != 3) {
+    return Error{photo.entry + ": " + photo.path.string() + ": " + std::to_string(image->channels) +
+                 " channels; photos must be 1-channel (grey), 3-channel (RGB) or RGBA"};
+  }
+  const ColourEncoding encoding = Resolve(photo.encoding, image->integer_samples);
+  Converted c;
+  try {
+    c = Convert(*image, encoding, options);
+  } catch (const std::bad_alloc&) {
+    return Error{photo.entry + ": " + photo.path.string() + ": not enough memory for " +
+                 Size(image->width, image->height) + " float RGB pixels"};
+  }
+  const size_t pixels = c.rgb.size();
+  if (c.non_finite > options.max_non_finite_fraction * static_cast<double>(pixels)) {
+    return Error{photo.entry + ": " + photo.path.string() + ": " + std::to_string(c.non_finite) +
+                 " of " + std::to_string(pixels) + " pixels are NaN/Inf (more than " +
+                 FormatNumber(100 * options.max_non_finite_fraction, kShownDigits) +
+                 " %): corrupt image"};
+  }
+  photo.encoding = encoding;
+  photo.rgb = std::move(c.rgb);
+  photo.flags = std::move(c.flags);
+  photo.non_finite_pixels = c.non_finite;
+  photo.saturated_pixels = c.saturated;
+  return Status::Ok();
+}
+
+Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options,
+                       const ProgressCallback& progress) {
+  if (Status s = options.Validate(); !s) return s;
+  const auto start = std::chrono::steady_clock::now();
+  const size_t n = set.photos.size();
+  std::vector<Status> status(n);
+  std::atomic<bool> failed{false};
+  std::atomic<size_t> done{0};
+  std::mutex progress_mutex;
+  ReportProgress(progress, "load photos", 0.0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      if (failed.load(std::memory_order_relaxed)) return;  // the set is refused anyway
+      status[i] = LoadPhoto(set.photos[i], options);
+      if (!status[i].ok()) failed = true;
+      const size_t finished = ++done;
+      if (progress) {
+        std::lock_guard<std::mutex> lock(progress_mutex);
+        progress("load photos", static_cast<double>(finished) / static_cast<double>(n));
+      }
+    }
+  });
+  if (failed) {
+    for (Photo& photo : set.photos) {  // no partial state
+      photo.rgb = Grid<Vec3f>();
+      photo.flags = Grid<uint8_t>();
+      photo.non_finite_pixels = photo.saturated_pixels = 0;
+    }
+    set.summary = PhotoLoadSummary{};
+    for (const Status& s : status) {
+      if (!s.ok()) return s;
+    }
+  }
+  PhotoLoadSummary summary;
+  for (const Photo& photo : set.photos) {
+    ++summary.photos_loaded;
+    summary.pixels += photo.rgb.size();
+    summary.non_finite_pixels += photo.non_finite_pixels;
+    summary.saturated_pixels += photo.saturated_pixels;
+    (photo.encoding == ColourEncoding::kSrgb ? summary.srgb_photos : summary.linear_photos) += 1;
+  }
+  summary.seconds = Seconds(start);
+  set.summary = summary;
+  return Status::Ok();
+}
+
+}  // namespace digitize
