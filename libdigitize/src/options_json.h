@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "digitize/core.h"
+#include "json_fields.h"
 
 namespace digitize {
 
@@ -17,8 +18,8 @@ nlohmann::json ToJson(const ReflectanceFitOptions& options);  // reflectance_fit
 nlohmann::json ToJson(const PackWriteOptions& options);       // pack.cpp
 // {"rotation": 3 rows, "translation_mm": 3 numbers}: transform.json and the pack header.
 nlohmann::json ToJson(const RigidTransform& transform);       // preprocess.cpp
-// Its inverse. The message names the member and what it must be ("rotation must be 3 rows of 3
-// numbers"), for the caller to prefix with the file. Checks the shape, not that R is a rotation.
-Result<RigidTransform> TransformFromJson(const nlohmann::json& json);  // preprocess.cpp
+// Its inverse (a member of a JSON file read with json_fields.h): Fails naming the key path when
+// a member is missing or not 3 x 3 / 3 finite numbers. Checks the shape, not that R is a rotation.
+RigidTransform TransformFrom(const Fields& fields);  // preprocess.cpp
 
 }  // namespace digitize

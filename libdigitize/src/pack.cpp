@@ -36,40 +36,35 @@ Vec3f NormalFromXY(float nx, float ny) {
   return {nx, ny, std::sqrt(1.0f - s)};
 }
 
-std::string Num(double v) {
-  char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);  // shortest round-trip form
-  return std::string(buf, r.ptr);
-}
 
 Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, double max_height_mm,
                            const RigidTransform& canvas_from_scan) {
   if (!(std::isfinite(pitch_mm) && pitch_mm >= kMinPackPitchMm))
-    return Error{"pitch_mm " + Num(pitch_mm) + " is not a texel pitch (at least " +
-                 Num(kMinPackPitchMm) + " mm, finite)"};
+    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) + " is not a texel pitch (at least " +
+                 FormatNumber(kMinPackPitchMm, kRoundTripDigits) + " mm, finite)"};
   const int texels = std::max(w, h);
   const double extent_mm = pitch_mm * texels;
   if (!(extent_mm <= kMaxPackExtentMm))
-    return Error{"pitch_mm " + Num(pitch_mm) + " x " + std::to_string(texels) +
-                 " texels = " + Num(extent_mm) + " mm, beyond the " + Num(kMaxPackExtentMm / 1000) +
+    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) + " x " + std::to_string(texels) +
+                 " texels = " + FormatNumber(extent_mm, kRoundTripDigits) + " mm, beyond the " + FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) +
                  " m a painting may measure"};
   if (!(std::isfinite(max_height_mm) && std::abs(max_height_mm) <= kMaxPackHeightMm))
-    return Error{"max_height_mm " + Num(max_height_mm) + " is outside [-" + Num(kMaxPackHeightMm) +
-                 ", " + Num(kMaxPackHeightMm) + "] mm"};
+    return Error{"max_height_mm " + FormatNumber(max_height_mm, kRoundTripDigits) + " is outside [-" + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) +
+                 ", " + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + "] mm"};
   if (!(std::isfinite(delta0_mm) && delta0_mm >= 0 &&
         (delta0_mm <= max_height_mm + 1e-9 || delta0_mm == 0)))
-    return Error{"delta0_mm " + Num(delta0_mm) + " is not in [0, max_height_mm " +
-                 Num(max_height_mm) + "]"};
+    return Error{"delta0_mm " + FormatNumber(delta0_mm, kRoundTripDigits) + " is not in [0, max_height_mm " +
+                 FormatNumber(max_height_mm, kRoundTripDigits) + "]"};
   const Mat3d& r = canvas_from_scan.rotation;
   if (!r.allFinite() ||
       !((r * r.transpose() - Mat3d::Identity()).norm() <= kPackRotationTolerance) ||
       !(r.determinant() > 0))
     return Error{"canvas_from_scan rotation is not a rotation (|R R^T - I| above " +
-                 Num(kPackRotationTolerance) + ", or det <= 0)"};
+                 FormatNumber(kPackRotationTolerance, kRoundTripDigits) + ", or det <= 0)"};
   const Vec3d& t = canvas_from_scan.translation;
   if (!t.allFinite() || !(t.norm() <= kMaxPackTranslationMm))
-    return Error{"canvas_from_scan translation (" + Num(t.x()) + ", " + Num(t.y()) + ", " +
-                 Num(t.z()) + ") mm is farther than " + Num(kMaxPackTranslationMm / 1000) +
+    return Error{"canvas_from_scan translation (" + FormatNumber(t.x(), kRoundTripDigits) + ", " + FormatNumber(t.y(), kRoundTripDigits) + ", " +
+                 FormatNumber(t.z(), kRoundTripDigits) + ") mm is farther than " + FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) +
                  " m from the scanner"};
   return Status::Ok();
 }
@@ -163,7 +158,7 @@ Status Pack::Validate() const {
       if (!(std::abs(field.height_mm(x, y)) <= kMaxPackHeightMm))
         return Error{"pack: height at texel " + TexelName(x, y) + " = " +
                      FormatNumber(field.height_mm(x, y)) + " mm is not finite or beyond " +
-                     Num(kMaxPackHeightMm) + " mm"};
+                     FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm"};
       if (static_cast<int>(field.state(x, y)) > 3)
         return Error{"pack: texel state at " + TexelName(x, y) + " is not a TexelState"};
       const Vec3f& n = normals(x, y);

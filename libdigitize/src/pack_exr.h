@@ -28,8 +28,6 @@ inline const char* const kPartNames[kParts] = {"surface", "reflectance", "boxes"
 
 // "x, y" of a texel in messages.
 std::string TexelName(int x, int y);
-// Shortest round-trip form of a number: what the header stores and the messages show.
-std::string Num(double v);
 
 uint16_t ToHalfBits(float v);
 float FromHalfBits(uint16_t bits);

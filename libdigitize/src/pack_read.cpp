@@ -14,6 +14,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/pack.h"
+#include "json_fields.h"
 #include "options_json.h"
 #include "pack_exr.h"
 
@@ -218,11 +219,9 @@ Result<std::vector<int>> ChannelIndices(const std::string& file, const OIIO::Ima
 
 
 Result<RigidTransform> ParseTransform(const std::string& file, const std::string& text) {
-  const json doc = json::parse(text, nullptr, false);
-  const std::string malformed = file + ": digitize:canvas_from_scan is malformed (";
-  if (doc.is_discarded()) return Error{malformed + "not JSON)"};
-  auto parsed = TransformFromJson(doc);
-  if (!parsed.ok()) return Error{malformed + parsed.error().message + ")"};
+  const std::string where = file + ": digitize:canvas_from_scan";
+  auto parsed = CatchBadInput([&] { return TransformFrom(Fields(ParseJson(text, where), where)); });
+  if (!parsed.ok()) return parsed.error();
   const RigidTransform t = *parsed;
   const Mat3d& R = t.rotation;
   if (!R.allFinite() || !t.translation.allFinite() ||
@@ -253,8 +252,8 @@ Status CheckSizeMm(const std::string& file, const std::string& text, const PackS
   const double want[2] = {s.width * s.pitch_mm, s.height * s.pitch_mm};
   for (int i = 0; i < 2; ++i)
     if (!(std::abs(size[i] - want[i]) <= kPackSizeTolerance * want[i]))
-      return Error{file + ": digitize:size_mm " + Num(size[0]) + " x " + Num(size[1]) +
-                   " mm disagrees with pitch_mm x texels = " + Num(want[0]) + " x " + Num(want[1]) +
+      return Error{file + ": digitize:size_mm " + FormatNumber(size[0], kRoundTripDigits) + " x " + FormatNumber(size[1], kRoundTripDigits) +
+                   " mm disagrees with pitch_mm x texels = " + FormatNumber(want[0], kRoundTripDigits) + " x " + FormatNumber(want[1], kRoundTripDigits) +
                    " mm"};
   return Status::Ok();
 }
@@ -356,7 +355,7 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   h.cells_y = (s.height + s.cell_px - 1) / s.cell_px;
   if (*box_count != std::floor(*box_count) || *box_count < 0 ||
       *box_count > double(h.cells_x) * h.cells_y)
-    return Error{file + ": digitize:box_count " + Num(*box_count) + " exceeds the " +
+    return Error{file + ": digitize:box_count " + FormatNumber(*box_count, kRoundTripDigits) + " exceeds the " +
                  std::to_string(h.cells_x) + "x" + std::to_string(h.cells_y) + " cells"};
   s.box_count = static_cast<size_t>(*box_count);
 
@@ -485,7 +484,7 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     const float code = FromHalfBits(sp[3]);
     if (!(std::abs(height) <= kMaxPackHeightMm))
       return bad(i, "height " + FormatNumber(height) + " mm is not finite or beyond " +
-                        Num(kMaxPackHeightMm) + " mm");
+                        FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm");
     if (!(std::abs(nx) <= 1.001f && std::abs(ny) <= 1.001f && nx * nx + ny * ny <= 1.002f))
       return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) + ") is not a unit normal's x, y");
     if (!(code >= 0 && code < 4 * kTexelFitStatusCount && code == std::floor(code)))
@@ -526,7 +525,7 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
                      ") is not a texel of the cell"};
       if (!(std::abs(hmax) <= kMaxPackHeightMm))
         return Error{cell + ": h_max " + FormatNumber(hmax) + " mm is not finite or beyond " +
-                     Num(kMaxPackHeightMm) + " mm"};
+                     FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm"};
       b.h_max_mm = hmax;
       b.u_max = b.x0 + static_cast<int>(du);
       b.v_max = b.y0 + static_cast<int>(dv);

@@ -10,7 +10,6 @@
 namespace digitize {
 
 namespace fs = std::filesystem;
-using pack_exr::Num;
 using pack_exr::TexelName;
 
 Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions& options) {
@@ -24,11 +23,11 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   const Pack& p = *pack;
   v.checks.push_back("container: OpenEXR, 3 parts, version " + std::to_string(v.summary.version) +
                      ", " + ToString(v.summary.encoding) + " encoding");
-  v.checks.push_back("geometry: pitch " + Num(p.field.pitch_mm) + " mm, " + Num(p.width_mm()) +
-                     " x " + Num(p.height_mm()) + " mm (as digitize:size_mm, within " +
-                     Num(kMaxPackExtentMm / 1000) + " m), heights, H and delta0 within " +
-                     Num(kMaxPackHeightMm) + " mm, canvas_from_scan a rotation within " +
-                     Num(kMaxPackTranslationMm / 1000) + " m");
+  v.checks.push_back("geometry: pitch " + FormatNumber(p.field.pitch_mm, kRoundTripDigits) + " mm, " + FormatNumber(p.width_mm(), kRoundTripDigits) +
+                     " x " + FormatNumber(p.height_mm(), kRoundTripDigits) + " mm (as digitize:size_mm, within " +
+                     FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) + " m), heights, H and delta0 within " +
+                     FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm, canvas_from_scan a rotation within " +
+                     FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) + " m");
   // ReadPack refused the file unless its checksum matched; verify's output says it was checked.
   v.checks.push_back(
       "checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "

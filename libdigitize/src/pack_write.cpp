@@ -104,10 +104,10 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
                  "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
                  "M = texel state + 4 x fit status; rho_d rho_s 1/sr; boxes: h_max mm, u/v_max texels "
                  "from the cell corner");
-  meta.attribute("digitize:pitch_mm", Num(pack.field.pitch_mm));
-  meta.attribute("digitize:size_mm", Num(pack.width_mm()) + " x " + Num(pack.height_mm()));
-  meta.attribute("digitize:delta0_mm", Num(pack.delta0_mm));
-  meta.attribute("digitize:max_height_mm", Num(pack.max_height_mm));
+  meta.attribute("digitize:pitch_mm", FormatNumber(pack.field.pitch_mm, kRoundTripDigits));
+  meta.attribute("digitize:size_mm", FormatNumber(pack.width_mm(), kRoundTripDigits) + " x " + FormatNumber(pack.height_mm(), kRoundTripDigits));
+  meta.attribute("digitize:delta0_mm", FormatNumber(pack.delta0_mm, kRoundTripDigits));
+  meta.attribute("digitize:max_height_mm", FormatNumber(pack.max_height_mm, kRoundTripDigits));
   meta.attribute("digitize:cell_px", std::to_string(pack.cell_px));
   meta.attribute("digitize:box_count", std::to_string(pack.boxes.size()));
   meta.attribute("digitize:canvas_from_scan", ToJson(pack.canvas_from_scan).dump());

@@ -4,12 +4,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "digitize/image_io.h"
+#include "json_fields.h"
 #include "options_json.h"
 
 namespace digitize {
@@ -53,39 +52,10 @@ nlohmann::json ToJson(const RigidTransform& t) {
           {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
 }
 
-Result<RigidTransform> TransformFromJson(const nlohmann::json& json) {
-  if (!json.is_object()) return Error{"must be an object"};
-  // rows x cols numbers under `key` (cols 0: a list of `rows` numbers), row-major; extra entries
-  // are ignored.
-  auto numbers = [&](const char* key, int rows, int cols, double* out) -> Status {
-    const auto it = json.find(key);
-    if (it == json.end()) return Error{std::string(key) + " is missing"};
-    const Error bad{std::string(key) + " must be " + std::to_string(rows) +
-                    (cols > 0 ? " rows of " + std::to_string(cols) : std::string()) + " numbers"};
-    if (!it->is_array() || it->size() < static_cast<size_t>(rows)) return bad;
-    for (int r = 0; r < rows; ++r) {
-      const nlohmann::json& row = (*it)[r];
-      if (cols == 0) {
-        if (!row.is_number()) return bad;
-        out[r] = row.get<double>();
-        continue;
-      }
-      if (!row.is_array() || row.size() < static_cast<size_t>(cols)) return bad;
-      for (int c = 0; c < cols; ++c) {
-        if (!row[c].is_number()) return bad;
-        out[r * cols + c] = row[c].get<double>();
-      }
-    }
-    return Status::Ok();
-  };
-  double rotation[9], translation[3];
-  if (Status s = numbers("rotation", 3, 3, rotation); !s.ok()) return Error{s.message()};
-  if (Status s = numbers("translation_mm", 3, 0, translation); !s.ok()) return Error{s.message()};
+RigidTransform TransformFrom(const Fields& fields) {
   RigidTransform t;
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) t.rotation(r, c) = rotation[3 * r + c];
-    t.translation(r) = translation[r];
-  }
+  t.rotation = fields.Matrix3("rotation");
+  t.translation = fields.Vector3("translation_mm");
   return t;
 }
 
@@ -361,49 +331,61 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
 namespace digitize {
 namespace {
 
-// A JSON object file of the given "format"; errors name the file.
-Result<nlohmann::json> ReadJsonObject(const std::filesystem::path& path, const char* format) {
-  std::ifstream file(path);
-  if (!file) return Error{path.string() + ": cannot open"};
-  std::stringstream text;
-  text << file.rdbuf();
-  nlohmann::json doc = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
-  if (doc.is_discarded()) return Error{path.string() + ": not JSON"};
+// A canvas folder's JSON file (docs/formats.md), whose "format" must be `format`.
+nlohmann::json ReadFormatFile(const std::filesystem::path& path, const char* format) {
+  auto text = ReadTextFile(path, std::string(format) + " file");
+  if (!text.ok()) Fail(text.error().message);
+  nlohmann::json doc = ParseJson(*text, path.string());
   if (!doc.is_object() || !doc.contains("format") || doc["format"] != format)
-    return Error{path.string() + ": not a " + format + " file"};
+    Fail(path.string() + ": not a " + format + " file");
   return doc;
 }
 
-// Members of a canvas folder's JSON files; each error names the file, the key path and the type
-// wanted ("c/boxes.json: boxes[3].x0 must be an integer").
-struct JsonFields {
-  std::string path;
+// transform.json: the pitch and canvas_from_scan.
+void ReadTransformFile(const std::filesystem::path& path, PreprocessedCanvas& out) {
+  const std::string file = path.string();
+  const nlohmann::json doc = ReadFormatFile(path, "digitize.transform");
+  const Fields top(doc, file);
+  const double pitch = top.Number("pitch_mm");
+  if (!(pitch > 0)) Fail(file + ": pitch_mm must be > 0, got " + FormatNumber(pitch));
+  out.field.pitch_mm = pitch;
+  out.canvas_from_scan = TransformFrom(top.Object("canvas_from_scan"));
+  const Mat3d& R = out.canvas_from_scan.rotation;
+  if ((R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
+    Fail(file + ": canvas_from_scan.rotation is not a rotation");
+}
 
-  static std::string Key(const std::string& at, const char* key) {
-    return at.empty() ? key : at + "." + key;
+// boxes.json: the bump plane, H, the cell size and the boxes, each inside the w x h grid.
+void ReadBoxesFile(const std::filesystem::path& path, int w, int h, PreprocessedCanvas& out) {
+  const std::string file = path.string();
+  const nlohmann::json doc = ReadFormatFile(path, "digitize.boxes");
+  const Fields top(doc, file);
+  constexpr int64_t kIntMax = std::numeric_limits<int>::max();
+  out.delta0_mm = top.Number("delta0_mm");
+  out.max_height_mm = top.Number("max_height_mm");
+  out.cell_px = static_cast<int>(top.Integer("cell_px", -kIntMax, kIntMax));
+  if (out.cell_px < 1)
+    Fail(file + ": delta0_mm, max_height_mm must be finite, cell_px >= 1");
+  const nlohmann::json& boxes = top.Array("boxes");
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    const Fields b(boxes[i], file + ": boxes[" + std::to_string(i) + "]");
+    ReliefBox box;
+    for (auto [key, target] : {std::pair<const char*, int*>{"x0", &box.x0},
+                               {"y0", &box.y0},
+                               {"width", &box.width},
+                               {"height", &box.height},
+                               {"u_max", &box.u_max},
+                               {"v_max", &box.v_max}})
+      *target = static_cast<int>(b.Integer(key, -kIntMax, kIntMax));
+    box.h_max_mm = static_cast<float>(b.Number("h_max_mm"));
+    if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
+        int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
+        !std::isfinite(box.h_max_mm))
+      Fail(file + ": box " + std::to_string(i) + " is not inside the " + std::to_string(w) + "x" +
+           std::to_string(h) + " grid");
+    out.boxes.push_back(box);
   }
-  Result<const nlohmann::json*> Member(const nlohmann::json& object, const char* key,
-                                       const std::string& at = "") const {
-    const auto it = object.find(key);
-    if (it == object.end()) return Error{path + ": " + Key(at, key) + " is missing"};
-    return &*it;
-  }
-  Result<double> Number(const nlohmann::json& object, const char* key,
-                        const std::string& at = "") const {
-    auto v = Member(object, key, at);
-    if (!v.ok()) return v.error();
-    if (!(*v)->is_number()) return Error{path + ": " + Key(at, key) + " must be a number"};
-    return (*v)->get<double>();
-  }
-  Result<int> Int(const nlohmann::json& object, const char* key, const std::string& at = "") const {
-    auto v = Member(object, key, at);
-    if (!v.ok()) return v.error();
-    if (!(*v)->is_number_integer() || (*v)->get<int64_t>() < std::numeric_limits<int>::min() ||
-        (*v)->get<int64_t>() > std::numeric_limits<int>::max())
-      return Error{path + ": " + Key(at, key) + " must be an integer"};
-    return static_cast<int>((*v)->get<int64_t>());
-  }
-};
+}
 
 }  // namespace
 
@@ -474,66 +456,12 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
     out.normals.data[i] = n;
   }
 
-  using nlohmann::json;
-  auto transform = ReadJsonObject(dir / "transform.json", "digitize.transform");
-  if (!transform.ok()) return transform.error();
-  const JsonFields t{(dir / "transform.json").string()};
-  auto pitch = t.Number(*transform, "pitch_mm");
-  if (!pitch.ok()) return pitch.error();
-  if (!(std::isfinite(*pitch) && *pitch > 0))
-    return Error{t.path + ": pitch_mm must be > 0, got " + FormatNumber(*pitch)};
-  out.field.pitch_mm = *pitch;
-  auto pose = t.Member(*transform, "canvas_from_scan");
-  if (!pose.ok()) return pose.error();
-  auto pose_value = TransformFromJson(**pose);
-  if (!pose_value.ok()) return Error{t.path + ": canvas_from_scan." + pose_value.error().message};
-  out.canvas_from_scan = *pose_value;
-  const Mat3d& R = out.canvas_from_scan.rotation;
-  if (!R.allFinite() || !out.canvas_from_scan.translation.allFinite() ||
-      (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
-    return Error{t.path + ": canvas_from_scan.rotation is not a rotation"};
-
-  auto boxes_doc = ReadJsonObject(dir / "boxes.json", "digitize.boxes");
-  if (!boxes_doc.ok()) return boxes_doc.error();
-  const JsonFields bf{(dir / "boxes.json").string()};
-  auto delta0 = bf.Number(*boxes_doc, "delta0_mm");
-  if (!delta0.ok()) return delta0.error();
-  auto max_height = bf.Number(*boxes_doc, "max_height_mm");
-  if (!max_height.ok()) return max_height.error();
-  auto cell = bf.Int(*boxes_doc, "cell_px");
-  if (!cell.ok()) return cell.error();
-  out.delta0_mm = *delta0;
-  out.max_height_mm = *max_height;
-  out.cell_px = *cell;
-  if (!(std::isfinite(out.delta0_mm) && std::isfinite(out.max_height_mm) && out.cell_px >= 1))
-    return Error{bf.path + ": delta0_mm, max_height_mm must be finite, cell_px >= 1"};
-  auto boxes = bf.Member(*boxes_doc, "boxes");
-  if (!boxes.ok()) return boxes.error();
-  if (!(*boxes)->is_array()) return Error{bf.path + ": \"boxes\" must be an array"};
-  for (const json& b : **boxes) {
-    const std::string at = "boxes[" + std::to_string(out.boxes.size()) + "]";
-    if (!b.is_object()) return Error{bf.path + ": " + at + " must be an object"};
-    ReliefBox box;
-    for (auto [key, target] : {std::pair<const char*, int*>{"x0", &box.x0},
-                               {"y0", &box.y0},
-                               {"width", &box.width},
-                               {"height", &box.height},
-                               {"u_max", &box.u_max},
-                               {"v_max", &box.v_max}}) {
-      auto v = bf.Int(b, key, at);
-      if (!v.ok()) return v.error();
-      *target = *v;
-    }
-    auto h_max = bf.Number(b, "h_max_mm", at);
-    if (!h_max.ok()) return h_max.error();
-    box.h_max_mm = static_cast<float>(*h_max);
-    if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
-        int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
-        !std::isfinite(box.h_max_mm))
-      return Error{bf.path + ": box " + std::to_string(out.boxes.size()) +
-                   " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
-    out.boxes.push_back(box);
-  }
+  const Result<bool> json_read = CatchBadInput([&] {
+    ReadTransformFile(dir / "transform.json", out);
+    ReadBoxesFile(dir / "boxes.json", w, h, out);
+    return true;
+  });
+  if (!json_read.ok()) return json_read.error();
   return out;
 }
 

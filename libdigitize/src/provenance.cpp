@@ -7,11 +7,13 @@
 #include <chrono>
 #include <ctime>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <system_error>
 
+#include "digitize/image_io.h"
 #include "digitize/pack.h"
+#include "json_fields.h"
 #include "options_json.h"
 #include "pack_exr.h"
 
@@ -37,45 +39,34 @@ json ProvenanceToJson(const PackProvenance& p) {
 }
 
 Result<PackProvenance> ParseProvenance(const std::string& file, const std::string& text) {
-  PackProvenance p;
   const json doc = json::parse(text, nullptr, /*allow_exceptions=*/false);
   if (doc.is_discarded() || !doc.is_object())
     return Error{file + ": digitize:provenance is not a JSON object"};
-  const std::string where = file + ": digitize:provenance";
-  // A member that must be a string when present ("" when absent).
-  auto text_of = [&](const json& object, const char* key, const std::string& at,
-                     std::string& out) -> Status {
-    const auto it = object.find(key);
-    if (it == object.end()) return Status::Ok();
-    if (!it->is_string()) return Error{at + "." + key + " must be a string"};
-    out = it->get<std::string>();
-    return Status::Ok();
-  };
-  for (auto [key, target] : {std::pair<const char*, std::string*>{"tool_version", &p.tool_version},
-                             {"created_utc", &p.created_utc},
-                             {"fit_brief", &p.fit_brief}})
-    if (Status s = text_of(doc, key, where, *target); !s.ok()) return Error{s.message()};
-  if (doc.contains("options")) p.options_json = doc["options"].dump();
-  if (doc.contains("inputs")) {
-    const json& inputs = doc["inputs"];
-    if (!inputs.is_array()) return Error{file + ": digitize:provenance inputs is not an array"};
-    for (size_t i = 0; i < inputs.size(); ++i) {
-      const json& in = inputs[i];
-      const std::string at = where + ".inputs[" + std::to_string(i) + "]";
-      if (!in.is_object()) return Error{at + " must be an object"};
-      if (!in.contains("name")) return Error{at + ".name is missing"};
-      PackInput input;
-      if (Status s = text_of(in, "name", at, input.name); !s.ok()) return Error{s.message()};
-      if (Status s = text_of(in, "sha1", at, input.sha1); !s.ok()) return Error{s.message()};
-      if (in.contains("bytes")) {
-        const json& bytes = in["bytes"];
-        if (!bytes.is_number()) return Error{at + ".bytes must be a number"};
-        input.bytes = bytes.get<uint64_t>();
+  if (doc.contains("inputs") && !doc["inputs"].is_array())
+    return Error{file + ": digitize:provenance inputs is not an array"};
+  return CatchBadInput([&] {
+    const Fields top(doc, file + ": digitize:provenance");
+    auto text_of = [](const Fields& f, const char* key) { return f.Has(key) ? f.String(key) : ""; };
+    PackProvenance p;
+    p.tool_version = text_of(top, "tool_version");
+    p.created_utc = text_of(top, "created_utc");
+    p.fit_brief = text_of(top, "fit_brief");
+    if (top.Has("options")) p.options_json = top.Get("options").dump();
+    if (top.Has("inputs")) {
+      const json& inputs = top.Array("inputs");
+      for (size_t i = 0; i < inputs.size(); ++i) {
+        const Fields in(inputs[i], top.At("inputs[" + std::to_string(i) + "]"));
+        PackInput input;
+        input.name = in.String("name");
+        input.sha1 = text_of(in, "sha1");
+        if (in.Has("bytes"))
+          input.bytes = static_cast<uint64_t>(
+              in.Integer("bytes", 0, std::numeric_limits<int64_t>::max()));
+        p.inputs.push_back(std::move(input));
       }
-      p.inputs.push_back(std::move(input));
     }
-  }
-  return p;
+    return p;
+  });
 }
 
 }  // namespace pack_exr
@@ -153,22 +144,21 @@ Result<PackProvenance> ProvenanceFromOutputs(const fs::path& canvas_dir, const f
                               "/" + f.filename().string(),
                           *sha, static_cast<uint64_t>(fs::file_size(f, ec))});
     }
-    std::ifstream report(dir / "report.json");
-    if (!report) return Error{(dir / "report.json").string() + ": cannot open (not a " + stage + " output folder?)"};
-    std::stringstream text;
-    text << report.rdbuf();
     const std::string report_path = (dir / "report.json").string();
-    const json doc = json::parse(text.str(), nullptr, false);
+    auto text = ReadTextFile(dir / "report.json", std::string(stage) + " report");
+    if (!text.ok())
+      return Error{report_path + ": cannot open (not a " + stage + " output folder?)"};
+    const json doc = json::parse(*text, nullptr, false);
     if (doc.is_discarded() || !doc.is_object()) return Error{report_path + ": not JSON"};
     const bool is_fit = std::string(stage) == "fit";
-    const auto wrong = [&](const char* key, const char* type) {
-      return Error{report_path + ": \"" + key + "\" must be " + type};
-    };
-    if (doc.contains("inputs") && !doc["inputs"].is_array()) return wrong("inputs", "an array");
-    if (doc.contains("options") && !doc["options"].is_object())
-      return wrong("options", "an object");
-    if (is_fit && doc.contains("brief") && !doc["brief"].is_string())
-      return wrong("brief", "a string");
+    const Result<bool> typed = CatchBadInput([&] {
+      const Fields report(doc, report_path);
+      if (report.Has("inputs")) (void)report.Array("inputs");
+      if (report.Has("options")) (void)report.Object("options");
+      if (is_fit && report.Has("brief")) (void)report.String("brief");
+      return true;
+    });
+    if (!typed.ok()) return typed.error();
     json inputs = doc.value("inputs", json::array());
     for (json& in : inputs)
       if (in.is_string()) in = ProvenanceName(in.get<std::string>(), {});
