@@ -45,19 +45,7 @@ bool AllFinite(const Grid<T>& grid) {
 
 }  // namespace
 
-nlohmann::json ToJson(const RigidTransform& t) {
-  nlohmann::json rotation = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
-  return {{"rotation", rotation},
-          {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
-}
 
-RigidTransform TransformFrom(const Fields& fields) {
-  RigidTransform t;
-  t.rotation = fields.Matrix3("rotation");
-  t.translation = fields.Vector3("translation_mm");
-  return t;
-}
 
 Status PreprocessOptions::Validate() const {
   for (const auto& [name, status] :
