@@ -18,7 +18,7 @@ nlohmann::json ToJson(const PreprocessOptions& options);      // preprocess.cpp
 nlohmann::json ToJson(const ReflectanceFitOptions& options);  // reflectance_fit.cpp
 nlohmann::json ToJson(const PackWriteOptions& options);       // pack.cpp
 // {"rotation": 3 rows, "translation_mm": 3 numbers}: transform.json and the pack header.
-nlohmann::json ToJson(const RigidTransform& transform);       // transform_json.cpp
+nlohmann::json ToJson(const RigidTransform& transform);  // transform_json.cpp
 // Its inverse (a member of a JSON file read with json_fields.h): Fails naming the key path when
 // a member is missing or not 3 x 3 / 3 finite numbers. Checks the shape, not that R is a rotation.
 RigidTransform TransformFrom(const Fields& fields);  // transform_json.cpp

@@ -36,25 +36,28 @@ Vec3f NormalFromXY(float nx, float ny) {
   return {nx, ny, std::sqrt(1.0f - s)};
 }
 
-
 Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, double max_height_mm,
                            const RigidTransform& canvas_from_scan) {
   if (!(std::isfinite(pitch_mm) && pitch_mm >= kMinPackPitchMm))
-    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) + " is not a texel pitch (at least " +
+    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) +
+                 " is not a texel pitch (at least " +
                  FormatNumber(kMinPackPitchMm, kRoundTripDigits) + " mm, finite)"};
   const int texels = std::max(w, h);
   const double extent_mm = pitch_mm * texels;
   if (!(extent_mm <= kMaxPackExtentMm))
-    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) + " x " + std::to_string(texels) +
-                 " texels = " + FormatNumber(extent_mm, kRoundTripDigits) + " mm, beyond the " + FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) +
+    return Error{"pitch_mm " + FormatNumber(pitch_mm, kRoundTripDigits) + " x " +
+                 std::to_string(texels) + " texels = " + FormatNumber(extent_mm, kRoundTripDigits) +
+                 " mm, beyond the " + FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) +
                  " m a painting may measure"};
   if (!(std::isfinite(max_height_mm) && std::abs(max_height_mm) <= kMaxPackHeightMm))
-    return Error{"max_height_mm " + FormatNumber(max_height_mm, kRoundTripDigits) + " is outside [-" + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) +
-                 ", " + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + "] mm"};
+    return Error{"max_height_mm " + FormatNumber(max_height_mm, kRoundTripDigits) +
+                 " is outside [-" + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + ", " +
+                 FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + "] mm"};
   if (!(std::isfinite(delta0_mm) && delta0_mm >= 0 &&
         (delta0_mm <= max_height_mm + 1e-9 || delta0_mm == 0)))
-    return Error{"delta0_mm " + FormatNumber(delta0_mm, kRoundTripDigits) + " is not in [0, max_height_mm " +
-                 FormatNumber(max_height_mm, kRoundTripDigits) + "]"};
+    return Error{"delta0_mm " + FormatNumber(delta0_mm, kRoundTripDigits) +
+                 " is not in [0, max_height_mm " + FormatNumber(max_height_mm, kRoundTripDigits) +
+                 "]"};
   const Mat3d& r = canvas_from_scan.rotation;
   if (!r.allFinite() ||
       !((r * r.transpose() - Mat3d::Identity()).norm() <= kPackRotationTolerance) ||
@@ -63,12 +66,13 @@ Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, doub
                  FormatNumber(kPackRotationTolerance, kRoundTripDigits) + ", or det <= 0)"};
   const Vec3d& t = canvas_from_scan.translation;
   if (!t.allFinite() || !(t.norm() <= kMaxPackTranslationMm))
-    return Error{"canvas_from_scan translation (" + FormatNumber(t.x(), kRoundTripDigits) + ", " + FormatNumber(t.y(), kRoundTripDigits) + ", " +
-                 FormatNumber(t.z(), kRoundTripDigits) + ") mm is farther than " + FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) +
+    return Error{"canvas_from_scan translation (" + FormatNumber(t.x(), kRoundTripDigits) + ", " +
+                 FormatNumber(t.y(), kRoundTripDigits) + ", " +
+                 FormatNumber(t.z(), kRoundTripDigits) + ") mm is farther than " +
+                 FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) +
                  " m from the scanner"};
   return Status::Ok();
 }
-
 
 // Integrity: EXR has no checksum, and a flipped bit in ZIP data can decode to other valid-looking
 // values. The writer hashes every digitize:* attribute (sorted by name, the checksum excluded)

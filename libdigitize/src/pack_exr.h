@@ -21,8 +21,9 @@ inline constexpr float kHalfMax = 65504.0f;
 // Channel layout of each part, in the order the Pack is filled. EXR stores channels sorted by
 // name, so the reader looks them up by name, never by position.
 inline const std::vector<std::string> kSurfaceChannels = {"H", "NX", "NY", "M"};
-inline const std::vector<std::string> kReflectanceChannels = {
-    "rho_d.R", "rho_d.G", "rho_d.B", "rho_s.R", "rho_s.G", "rho_s.B", "lobe.cx", "lobe.cy", "lobe.k"};
+inline const std::vector<std::string> kReflectanceChannels = {"rho_d.R", "rho_d.G", "rho_d.B",
+                                                              "rho_s.R", "rho_s.G", "rho_s.B",
+                                                              "lobe.cx", "lobe.cy", "lobe.k"};
 inline const std::vector<std::string> kBoxChannels = {"present", "h_max", "u_max", "v_max"};
 inline const char* const kPartNames[kParts] = {"surface", "reflectance", "boxes"};
 

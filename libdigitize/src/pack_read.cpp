@@ -72,7 +72,8 @@ Status CheckChannelList(const std::string& name, size_t part, const char* list, 
 Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_bytes,
                                             const PackReadOptions& options) {
   const std::string name = path.string();
-  const uint64_t want = std::min<uint64_t>(file_bytes, static_cast<uint64_t>(options.max_header_bytes) + 8);
+  const uint64_t want =
+      std::min<uint64_t>(file_bytes, static_cast<uint64_t>(options.max_header_bytes) + 8);
   std::vector<char> bytes(want);
   {
     std::ifstream in(path, std::ios::binary);
@@ -111,7 +112,8 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
   if (!read_i32(magic) || magic != 20000630)
     return Error{name + ": not an OpenEXR file (bad magic number), so not a digitize pack"};
   if (!read_i32(version)) return Error{truncated};
-  if ((version & 0xff) != 2) return Error{name + ": unsupported OpenEXR version " + std::to_string(version & 0xff)};
+  if ((version & 0xff) != 2)
+    return Error{name + ": unsupported OpenEXR version " + std::to_string(version & 0xff)};
   if ((version & 0x800) != 0) return Error{name + ": deep OpenEXR data, not a digitize pack"};
   if ((version & 0x400) != 0) max_name = 255;
   const bool multipart = (version & 0x1000) != 0;
@@ -121,10 +123,10 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
   std::vector<RawPart> parts;
   for (;;) {
     if (!need(1)) {
-      return Error{file_bytes > bytes.size() ? name + ": OpenEXR headers larger than " +
-                                                   std::to_string(options.max_header_bytes) +
-                                                   " bytes (limit)"
-                                             : truncated};
+      return Error{file_bytes > bytes.size()
+                       ? name + ": OpenEXR headers larger than " +
+                             std::to_string(options.max_header_bytes) + " bytes (limit)"
+                       : truncated};
     }
     if (bytes[pos] == '\0') {  // empty header: end of the header list
       ++pos;
@@ -157,7 +159,8 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
         for (int32_t& b : box) (void)read_i32(b);
         const int64_t w = int64_t{box[2]} - box[0] + 1, h = int64_t{box[3]} - box[1] + 1;
         if (w <= 0 || h <= 0)
-          return Error{name + ": part " + std::to_string(parts.size()) + " has an empty data window"};
+          return Error{name + ": part " + std::to_string(parts.size()) +
+                       " has an empty data window"};
         if (w > options.max_texels || h > options.max_texels || w * h > options.max_texels)
           return Error{name + ": part " + std::to_string(parts.size()) + " claims " +
                        std::to_string(w) + "x" + std::to_string(h) + " pixels, more than the " +
@@ -167,8 +170,8 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
         has_window = true;
       } else if (attr == "channels") {
         if (type != "chlist") return Error{name + ": malformed channels attribute"};
-        if (Status st = CheckChannelList(name, parts.size(), bytes.data() + pos,
-                                         static_cast<size_t>(size));
+        if (Status st =
+                CheckChannelList(name, parts.size(), bytes.data() + pos, static_cast<size_t>(size));
             !st.ok())
           return Error{st.message()};
         pos += static_cast<size_t>(size);
@@ -217,7 +220,6 @@ Result<std::vector<int>> ChannelIndices(const std::string& file, const OIIO::Ima
   return index;
 }
 
-
 Result<RigidTransform> ParseTransform(const std::string& file, const std::string& text) {
   const std::string where = file + ": digitize:canvas_from_scan";
   auto parsed = CatchBadInput([&] { return TransformFrom(Fields(ParseJson(text, where), where)); });
@@ -252,9 +254,11 @@ Status CheckSizeMm(const std::string& file, const std::string& text, const PackS
   const double want[2] = {s.width * s.pitch_mm, s.height * s.pitch_mm};
   for (int i = 0; i < 2; ++i)
     if (!(std::abs(size[i] - want[i]) <= kPackSizeTolerance * want[i]))
-      return Error{file + ": digitize:size_mm " + FormatNumber(size[0], kRoundTripDigits) + " x " + FormatNumber(size[1], kRoundTripDigits) +
-                   " mm disagrees with pitch_mm x texels = " + FormatNumber(want[0], kRoundTripDigits) + " x " + FormatNumber(want[1], kRoundTripDigits) +
-                   " mm"};
+      return Error{
+          file + ": digitize:size_mm " + FormatNumber(size[0], kRoundTripDigits) + " x " +
+          FormatNumber(size[1], kRoundTripDigits) +
+          " mm disagrees with pitch_mm x texels = " + FormatNumber(want[0], kRoundTripDigits) +
+          " x " + FormatNumber(want[1], kRoundTripDigits) + " mm"};
   return Status::Ok();
 }
 
@@ -294,8 +298,9 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   if (*version != std::floor(*version) || *version < 1)
     return Error{file + ": bad pack version " + FormatNumber(*version)};
   if (*version > kPackVersion)
-    return Error{file + ": pack version " + FormatNumber(*version) + " is newer than this reader (" +
-                 std::to_string(kPackVersion) + "); update digitize"};
+    return Error{file + ": pack version " + FormatNumber(*version) +
+                 " is newer than this reader (" + std::to_string(kPackVersion) +
+                 "); update digitize"};
   s.version = static_cast<int>(*version);
   s.width = spec.width;
   s.height = spec.height;
@@ -355,8 +360,9 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   h.cells_y = (s.height + s.cell_px - 1) / s.cell_px;
   if (*box_count != std::floor(*box_count) || *box_count < 0 ||
       *box_count > double(h.cells_x) * h.cells_y)
-    return Error{file + ": digitize:box_count " + FormatNumber(*box_count, kRoundTripDigits) + " exceeds the " +
-                 std::to_string(h.cells_x) + "x" + std::to_string(h.cells_y) + " cells"};
+    return Error{file + ": digitize:box_count " + FormatNumber(*box_count, kRoundTripDigits) +
+                 " exceeds the " + std::to_string(h.cells_x) + "x" + std::to_string(h.cells_y) +
+                 " cells"};
   s.box_count = static_cast<size_t>(*box_count);
 
   for (int part = 1; part < kParts; ++part) {
@@ -432,9 +438,12 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
   }
   std::vector<uint16_t> surface, reflectance;
   std::vector<float> cells;
-  if (Status st = ReadPart(file, *in, 0, OIIO::TypeDesc::HALF, surface); !st.ok()) return Error{st.message()};
-  if (Status st = ReadPart(file, *in, 1, OIIO::TypeDesc::HALF, reflectance); !st.ok()) return Error{st.message()};
-  if (Status st = ReadPart(file, *in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok()) return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 0, OIIO::TypeDesc::HALF, surface); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 1, OIIO::TypeDesc::HALF, reflectance); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok())
+    return Error{st.message()};
   // Into the writer's channel order (the file's order is EXR's, sorted by name), so the checksum
   // and everything below index by the canonical layout.
   auto canonical = [](auto& data, const std::vector<int>& ch) {
@@ -449,7 +458,8 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
   canonical(cells, box_ch);
   {
     const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
-    const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
+    const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2,
+                                       cells.size() * 4};
     const std::string stored = meta.get_string_attribute("digitize:checksum");
     if (stored.empty()) return Error{file + ": header attribute digitize:checksum is missing"};
     const bool intact = PackChecksum(meta, data, data_bytes) == stored;
@@ -486,7 +496,8 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       return bad(i, "height " + FormatNumber(height) + " mm is not finite or beyond " +
                         FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm");
     if (!(std::abs(nx) <= 1.001f && std::abs(ny) <= 1.001f && nx * nx + ny * ny <= 1.002f))
-      return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) + ") is not a unit normal's x, y");
+      return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) +
+                        ") is not a unit normal's x, y");
     if (!(code >= 0 && code < 4 * kTexelFitStatusCount && code == std::floor(code)))
       return bad(i, "M = " + FormatNumber(code) + " is not a texel state + 4 x fit status");
     const int c = static_cast<int>(code);
@@ -511,7 +522,8 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     for (int cx = 0; cx < cells_x; ++cx) {
       const float* c = &cells[4 * (static_cast<size_t>(cy) * cells_x + cx)];
       const float present = c[0], hmax = c[1], du = c[2], dv = c[3];
-      const std::string cell = file + ": box cell " + std::to_string(cx) + ", " + std::to_string(cy);
+      const std::string cell =
+          file + ": box cell " + std::to_string(cx) + ", " + std::to_string(cy);
       if (present == 0) continue;
       if (present != 1) return Error{cell + ": present must be 0 or 1"};
       ReliefBox b;
@@ -521,8 +533,8 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       b.height = std::min(s.cell_px, h - b.y0);
       if (!(du >= 0 && dv >= 0 && du < b.width && dv < b.height && du == std::floor(du) &&
             dv == std::floor(dv)))
-        return Error{cell + ": highest texel offset (" + FormatNumber(du) + ", " + FormatNumber(dv) +
-                     ") is not a texel of the cell"};
+        return Error{cell + ": highest texel offset (" + FormatNumber(du) + ", " +
+                     FormatNumber(dv) + ") is not a texel of the cell"};
       if (!(std::abs(hmax) <= kMaxPackHeightMm))
         return Error{cell + ": h_max " + FormatNumber(hmax) + " mm is not finite or beyond " +
                      FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm"};

@@ -23,11 +23,14 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   const Pack& p = *pack;
   v.checks.push_back("container: OpenEXR, 3 parts, version " + std::to_string(v.summary.version) +
                      ", " + ToString(v.summary.encoding) + " encoding");
-  v.checks.push_back("geometry: pitch " + FormatNumber(p.field.pitch_mm, kRoundTripDigits) + " mm, " + FormatNumber(p.width_mm(), kRoundTripDigits) +
-                     " x " + FormatNumber(p.height_mm(), kRoundTripDigits) + " mm (as digitize:size_mm, within " +
-                     FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) + " m), heights, H and delta0 within " +
-                     FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm, canvas_from_scan a rotation within " +
-                     FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) + " m");
+  v.checks.push_back(
+      "geometry: pitch " + FormatNumber(p.field.pitch_mm, kRoundTripDigits) + " mm, " +
+      FormatNumber(p.width_mm(), kRoundTripDigits) + " x " +
+      FormatNumber(p.height_mm(), kRoundTripDigits) + " mm (as digitize:size_mm, within " +
+      FormatNumber(kMaxPackExtentMm / 1000, kRoundTripDigits) +
+      " m), heights, H and delta0 within " + FormatNumber(kMaxPackHeightMm, kRoundTripDigits) +
+      " mm, canvas_from_scan a rotation within " +
+      FormatNumber(kMaxPackTranslationMm / 1000, kRoundTripDigits) + " m");
   // ReadPack refused the file unless its checksum matched; verify's output says it was checked.
   v.checks.push_back(
       "checksum: digitize:checksum (SHA-1) matches every digitize:* attribute and "
@@ -36,9 +39,9 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");
   // Heights are stored in half (or fewer bits): compare within that rounding.
-  const double rel = std::ldexp(1.0, -(v.summary.encoding == PackEncoding::kQuantised
-                                           ? v.summary.quantisation.height_bits
-                                           : 10));
+  const double rel = std::ldexp(
+      1.0,
+      -(v.summary.encoding == PackEncoding::kQuantised ? v.summary.quantisation.height_bits : 10));
   auto tol = [&](double hgt) { return rel * std::abs(hgt) + 1e-6; };
   float highest = -std::numeric_limits<float>::infinity();
   for (int y = 0; y < p.height(); ++y)

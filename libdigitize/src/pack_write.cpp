@@ -16,8 +16,9 @@ namespace {
 namespace fs = std::filesystem;
 using namespace pack_exr;
 
-constexpr const char* kGauge = "lafortune1: f = rho_d + rho_s max(0, cx vx lx + cy vy ly + vz lz)^k, "
-                               "cz = 1, v and l in the texel's tangent frame (tangent_frame.h)";
+constexpr const char* kGauge =
+    "lafortune1: f = rho_d + rho_s max(0, cx vx lx + cy vy ly + vz lz)^k, "
+    "cz = 1, v and l in the texel's tangent frame (tangent_frame.h)";
 
 uint16_t StateStatusCode(TexelState state, TexelFitStatus status) {
   return static_cast<uint16_t>(static_cast<int>(state) + 4 * static_cast<int>(status));
@@ -58,7 +59,8 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
     surface[4 * i + 0] = ToHalfBits(enc.field.height_mm.data[i]);
     surface[4 * i + 1] = ToHalfBits(enc.normals.data[i].x());
     surface[4 * i + 2] = ToHalfBits(enc.normals.data[i].y());
-    surface[4 * i + 3] = ToHalfBits(StateStatusCode(pack.field.state.data[i], pack.maps.status.data[i]));
+    surface[4 * i + 3] =
+        ToHalfBits(StateStatusCode(pack.field.state.data[i], pack.maps.status.data[i]));
     uint16_t* r = &reflectance[9 * i];
     for (int c = 0; c < 3; ++c) {
       r[c] = ToHalfBits(enc.maps.rho_d.data[i][c]);
@@ -68,10 +70,12 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
     r[7] = ToHalfBits(enc.maps.lobe.data[i][1]);
     r[8] = ToHalfBits(enc.maps.lobe.data[i][3]);
   }
-  const int cells_x = (w + pack.cell_px - 1) / pack.cell_px, cells_y = (h + pack.cell_px - 1) / pack.cell_px;
+  const int cells_x = (w + pack.cell_px - 1) / pack.cell_px,
+            cells_y = (h + pack.cell_px - 1) / pack.cell_px;
   std::vector<float> cells(static_cast<size_t>(cells_x) * cells_y * 4, 0.0f);
   for (const ReliefBox& b : pack.boxes) {
-    float* c = &cells[4 * (static_cast<size_t>(b.y0 / pack.cell_px) * cells_x + b.x0 / pack.cell_px)];
+    float* c =
+        &cells[4 * (static_cast<size_t>(b.y0 / pack.cell_px) * cells_x + b.x0 / pack.cell_px)];
     c[0] = 1.0f;
     c[1] = b.h_max_mm;
     c[2] = static_cast<float>(b.u_max - b.x0);
@@ -100,12 +104,14 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   if (options.encoding == PackEncoding::kQuantised)
     meta.attribute("digitize:quantisation", QuantisationText(options.quantisation));
   meta.attribute("digitize:gauge", kGauge);
-  meta.attribute("digitize:units",
-                 "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
-                 "M = texel state + 4 x fit status; rho_d rho_s 1/sr; boxes: h_max mm, u/v_max texels "
-                 "from the cell corner");
+  meta.attribute(
+      "digitize:units",
+      "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
+      "M = texel state + 4 x fit status; rho_d rho_s 1/sr; boxes: h_max mm, u/v_max texels "
+      "from the cell corner");
   meta.attribute("digitize:pitch_mm", FormatNumber(pack.field.pitch_mm, kRoundTripDigits));
-  meta.attribute("digitize:size_mm", FormatNumber(pack.width_mm(), kRoundTripDigits) + " x " + FormatNumber(pack.height_mm(), kRoundTripDigits));
+  meta.attribute("digitize:size_mm", FormatNumber(pack.width_mm(), kRoundTripDigits) + " x " +
+                                         FormatNumber(pack.height_mm(), kRoundTripDigits));
   meta.attribute("digitize:delta0_mm", FormatNumber(pack.delta0_mm, kRoundTripDigits));
   meta.attribute("digitize:max_height_mm", FormatNumber(pack.max_height_mm, kRoundTripDigits));
   meta.attribute("digitize:cell_px", std::to_string(pack.cell_px));
@@ -113,10 +119,9 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   meta.attribute("digitize:canvas_from_scan", ToJson(pack.canvas_from_scan).dump());
   // File names are bytes, not always UTF-8 (a capture machine's Latin-1 names): replaced, not
   // thrown on.
-  meta.attribute(
-      "digitize:provenance",
-      ProvenanceToJson(pack.provenance)
-          .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  meta.attribute("digitize:provenance",
+                 ProvenanceToJson(pack.provenance)
+                     .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
   const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
   meta.attribute("digitize:checksum", PackChecksum(meta, data, data_bytes));

@@ -76,8 +76,9 @@ Result<PackSummary> PackFromFolders(const fs::path& canvas_dir, const fs::path& 
   auto maps = ReadReflectanceMaps(fit_dir);
   if (!maps.ok()) return maps.error();
   if (canvas_dir.empty())
-    return Error{"--canvas is required (for an RTI capture, preprocess a height map or use "
-                 "`digitize run --photos capture.lp`)"};
+    return Error{
+        "--canvas is required (for an RTI capture, preprocess a height map or use "
+        "`digitize run --photos capture.lp`)"};
   auto canvas = ReadPreprocessOutputs(canvas_dir);
   if (!canvas.ok()) return canvas.error();
   auto provenance = ProvenanceFromOutputs(canvas_dir, fit_dir, options);
@@ -108,8 +109,7 @@ Result<PackProvenance> RunProvenance(const PipelineOptions& options, const Photo
   std::vector<fs::path> files(options.scans.begin(), options.scans.end());
   files.emplace_back(options.photos);
   for (const Photo& p : set.photos) files.push_back(p.path);
-  if (Status s =
-          AddProvenanceInputs(provenance, files, fs::absolute(options.photos).parent_path());
+  if (Status s = AddProvenanceInputs(provenance, files, fs::absolute(options.photos).parent_path());
       !s.ok())
     return Error{s.message()};
   provenance.fit_brief = fit.Brief();
@@ -160,7 +160,8 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   const FolderOutput work_canvas{kCommand, "canvas", inputs}, work_fit{kCommand, "fit", inputs};
   std::vector<fs::path> pack_keeps_off = inputs;
   if (!options.work.empty()) {
-    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok()) return Error{s.message()};
+    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok())
+      return Error{s.message()};
     if (Status s = CheckFolderOutput(work / "fit", work_fit); !s.ok()) return Error{s.message()};
     pack_keeps_off.push_back(work / "canvas");
     pack_keeps_off.push_back(work / "fit");

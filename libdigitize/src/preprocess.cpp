@@ -42,10 +42,7 @@ bool AllFinite(const Grid<T>& grid) {
   return true;
 }
 
-
 }  // namespace
-
-
 
 Status PreprocessOptions::Validate() const {
   for (const auto& [name, status] :
@@ -163,28 +160,28 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
 
 nlohmann::json ToJson(const PreprocessOptions& options) {
   return {{"sanitize",
-         {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
-          {"spike_mm", options.sanitize.spike_mm}}},
-        {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
-        {"canvas",
-         {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
-          {"stop_slope", options.canvas.stop_slope},
-          {"refine_step_mm", options.canvas.refine_step_mm},
-          {"refine_px", options.canvas.refine_px},
-          {"erode_px", options.canvas.erode_px},
-          {"trim_sigmas", options.canvas.trim_sigmas},
-          {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
-        {"resample",
-         {{"pitch_mm", options.resample.pitch_mm},
-          {"max_edge_factor", options.resample.max_edge_factor},
-          {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
-        {"relief",
-         {{"delta0_fraction", options.relief.delta0_fraction},
-          {"min_component_area_mm2", options.relief.min_component_area_mm2},
-          {"cell_px", options.relief.cell_px},
-          {"cover_px", options.relief.cover_px},
-          {"min_relief_mm", options.relief.min_relief_mm},
-          {"noise_margin_from_scan", options.noise_margin_from_scan}}}};
+           {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
+            {"spike_mm", options.sanitize.spike_mm}}},
+          {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
+          {"canvas",
+           {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
+            {"stop_slope", options.canvas.stop_slope},
+            {"refine_step_mm", options.canvas.refine_step_mm},
+            {"refine_px", options.canvas.refine_px},
+            {"erode_px", options.canvas.erode_px},
+            {"trim_sigmas", options.canvas.trim_sigmas},
+            {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
+          {"resample",
+           {{"pitch_mm", options.resample.pitch_mm},
+            {"max_edge_factor", options.resample.max_edge_factor},
+            {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
+          {"relief",
+           {{"delta0_fraction", options.relief.delta0_fraction},
+            {"min_component_area_mm2", options.relief.min_component_area_mm2},
+            {"cell_px", options.relief.cell_px},
+            {"cover_px", options.relief.cover_px},
+            {"min_relief_mm", options.relief.min_relief_mm},
+            {"noise_margin_from_scan", options.noise_margin_from_scan}}}};
 }
 
 std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
@@ -301,14 +298,14 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
                     {"boxes", boxes}};
   if (Status s = WriteTextFile(dir / "boxes.json", boxes_doc.dump(1) + "\n"); !s.ok()) return s;
 
-  json transform = {{"format", "digitize.transform"},
-                    {"version", 1},
-                    {"canvas_from_scan", ToJson(result.canvas.canvas_from_scan)},
-                    {"pitch_mm", f.pitch_mm},
-                    {"size_texels", {f.width(), f.height()}},
-                    {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
-                    {"texel_centre",
-                     "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
+  json transform = {
+      {"format", "digitize.transform"},
+      {"version", 1},
+      {"canvas_from_scan", ToJson(result.canvas.canvas_from_scan)},
+      {"pitch_mm", f.pitch_mm},
+      {"size_texels", {f.width(), f.height()}},
+      {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
+      {"texel_centre", "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
   if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
 
   return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
@@ -352,8 +349,7 @@ void ReadBoxesFile(const std::filesystem::path& path, int w, int h, Preprocessed
   out.delta0_mm = top.Number("delta0_mm");
   out.max_height_mm = top.Number("max_height_mm");
   out.cell_px = static_cast<int>(top.Integer("cell_px", -kIntMax, kIntMax));
-  if (out.cell_px < 1)
-    Fail(file + ": delta0_mm, max_height_mm must be finite, cell_px >= 1");
+  if (out.cell_px < 1) Fail(file + ": delta0_mm, max_height_mm must be finite, cell_px >= 1");
   const nlohmann::json& boxes = top.Array("boxes");
   for (size_t i = 0; i < boxes.size(); ++i) {
     const Fields b(boxes[i], file + ": boxes[" + std::to_string(i) + "]");

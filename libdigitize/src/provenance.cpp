@@ -33,8 +33,10 @@ json ProvenanceToJson(const PackProvenance& p) {
     options = json::parse(p.options_json, nullptr, /*allow_exceptions=*/false);
     if (options.is_discarded()) options = p.options_json;  // kept as text rather than lost
   }
-  return {{"tool_version", p.tool_version}, {"created_utc", p.created_utc},
-          {"fit_brief", p.fit_brief},       {"options", options},
+  return {{"tool_version", p.tool_version},
+          {"created_utc", p.created_utc},
+          {"fit_brief", p.fit_brief},
+          {"options", options},
           {"inputs", inputs}};
 }
 
@@ -60,8 +62,8 @@ Result<PackProvenance> ParseProvenance(const std::string& file, const std::strin
         input.name = in.String("name");
         input.sha1 = text_of(in, "sha1");
         if (in.Has("bytes"))
-          input.bytes = static_cast<uint64_t>(
-              in.Integer("bytes", 0, std::numeric_limits<int64_t>::max()));
+          input.bytes =
+              static_cast<uint64_t>(in.Integer("bytes", 0, std::numeric_limits<int64_t>::max()));
         p.inputs.push_back(std::move(input));
       }
     }
@@ -127,22 +129,24 @@ Result<PackProvenance> ProvenanceFromOutputs(const fs::path& canvas_dir, const f
   PackProvenance p = NewProvenance();
   json options = json::object();
   options["pack"] = ToJson(pack_options);
-  for (const auto& [stage, dir] : {std::pair<const char*, fs::path>{"preprocess", canvas_dir},
-                                   {"fit", fit_dir}}) {
+  for (const auto& [stage, dir] :
+       {std::pair<const char*, fs::path>{"preprocess", canvas_dir}, {"fit", fit_dir}}) {
     if (dir.empty()) continue;
     std::error_code ec;
     if (!fs::is_directory(dir, ec)) return Error{dir.string() + ": not a folder"};
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(dir, ec))
-      if (e.is_regular_file() && e.path().filename().string().front() != '.') files.push_back(e.path());
+      if (e.is_regular_file() && e.path().filename().string().front() != '.')
+        files.push_back(e.path());
     if (ec) return Error{dir.string() + ": cannot list: " + ec.message()};
     std::sort(files.begin(), files.end());
     for (const fs::path& f : files) {
       auto sha = FileSha1(f);
       if (!sha.ok()) return sha.error();
-      p.inputs.push_back({(dir.filename().empty() ? dir.parent_path().filename() : dir.filename()).string() +
-                              "/" + f.filename().string(),
-                          *sha, static_cast<uint64_t>(fs::file_size(f, ec))});
+      p.inputs.push_back(
+          {(dir.filename().empty() ? dir.parent_path().filename() : dir.filename()).string() + "/" +
+               f.filename().string(),
+           *sha, static_cast<uint64_t>(fs::file_size(f, ec))});
     }
     const std::string report_path = (dir / "report.json").string();
     auto text = ReadTextFile(dir / "report.json", std::string(stage) + " report");

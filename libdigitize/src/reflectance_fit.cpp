@@ -286,18 +286,18 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
 nlohmann::json ToJson(const ReflectanceFitOptions& options) {
   const BrdfFitOptions& f = options.fit;
   return {{"method", f.method == BrdfFitMethod::kFast ? "fast" : "ceres"},
-                {"noise_sigma", f.noise_sigma},
-                {"min_samples", f.min_samples},
-                {"k_min", f.k_min},
-                {"k_max", f.k_max},
-                {"max_specular_albedo", f.max_specular_albedo},
-                {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
-                {"min_cos", options.samples.min_cos},
-                {"shadow_rays", options.samples.shadow_rays},
-                {"visibility_rays", options.samples.visibility_rays},
-                {"skip_unblockable", options.samples.trace.skip_unblockable},
-                {"dark_outlier_ratio", options.dark_outlier_ratio},
-                {"dark_outlier_sigmas", options.dark_outlier_sigmas}};
+          {"noise_sigma", f.noise_sigma},
+          {"min_samples", f.min_samples},
+          {"k_min", f.k_min},
+          {"k_max", f.k_max},
+          {"max_specular_albedo", f.max_specular_albedo},
+          {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
+          {"min_cos", options.samples.min_cos},
+          {"shadow_rays", options.samples.shadow_rays},
+          {"visibility_rays", options.samples.visibility_rays},
+          {"skip_unblockable", options.samples.trace.skip_unblockable},
+          {"dark_outlier_ratio", options.dark_outlier_ratio},
+          {"dark_outlier_sigmas", options.dark_outlier_sigmas}};
 }
 
 std::string ReflectanceReportJson(const ReflectanceFitResult& result,

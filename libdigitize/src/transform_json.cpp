@@ -7,7 +7,8 @@ namespace digitize {
 
 nlohmann::json ToJson(const RigidTransform& t) {
   nlohmann::json rotation = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
+  for (int r = 0; r < 3; ++r)
+    rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
   return {{"rotation", rotation},
           {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
 }

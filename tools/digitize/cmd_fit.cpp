@@ -31,8 +31,8 @@ int RunFit(FitArgs args) {
   ProgressBar bar("fit");
   Result<PhotoSet> set = ReadPhotoSetFile(args.photos, args.photo, bar.Callback());
   if (!set.ok()) return Fail(cmd, set.error().message);
-  args.options = FitOptionsFor(*set, args.options,
-                               args.dark_ratio_option != nullptr && args.dark_ratio_option->count() > 0);
+  args.options = FitOptionsFor(
+      *set, args.options, args.dark_ratio_option != nullptr && args.dark_ratio_option->count() > 0);
   // Held-out photos read before the fit: a bad file fails before minutes of work, and its
   // images are inputs the output must not touch.
   std::optional<PhotoSet> held;

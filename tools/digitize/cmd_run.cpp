@@ -25,7 +25,8 @@ int Run(RunArgs args) {
   SetFitMethod(o.fit, args.method, args.threads);
   o.pack.encoding = args.quantised ? PackEncoding::kQuantised : PackEncoding::kHalf;
   o.read = ScanReadOptionsOf(o.read, args.mask, args.grid);
-  o.dark_outlier_ratio_chosen = args.dark_ratio_option != nullptr && args.dark_ratio_option->count() > 0;
+  o.dark_outlier_ratio_chosen =
+      args.dark_ratio_option != nullptr && args.dark_ratio_option->count() > 0;
   ProgressBar bar("run");
   Result<PipelineResult> r = RunPipeline(o, bar.Callback());
   bar.Finish();
@@ -55,37 +56,48 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
   c->add_option("scans", args->pipeline.scans, "Scan file(s), as for `digitize preprocess`")
       ->check(CLI::ExistingFile);
   c->add_option("--photos", args->pipeline.photos, "Calibration JSON or RTI .lp file")
-      ->required()->check(CLI::ExistingFile);
-  c->add_option("-o,--out", args->pipeline.out, "Pack file to write (replaced only on success)")->required();
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("-o,--out", args->pipeline.out, "Pack file to write (replaced only on success)")
+      ->required();
   c->add_option(
        "--work", args->pipeline.work,
        "Also write the canvas/ and fit/ folders here (for inspection or re-packing; only those two "
        "subfolders are replaced, each when new, empty or an earlier output of its kind)")
       ->transform(FolderPath());
-  c->add_option("--held-out", args->pipeline.held_out,
-                "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
+  c->add_option(
+       "--held-out", args->pipeline.held_out,
+       "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
       ->check(CLI::ExistingFile);
   c->add_option("--pixel-pitch-mm", args->pipeline.read.pixel_pitch_mm,
-                "Sample spacing (mm) of depth-only scans")->group("Input");
+                "Sample spacing (mm) of depth-only scans")
+      ->group("Input");
   c->add_option("--height-scale-mm", args->pipeline.read.height_scale_mm,
-                "mm per count for 16-bit depth images")->group("Input");
+                "mm per count for 16-bit depth images")
+      ->group("Input");
   c->add_option("--height-offset-mm", args->pipeline.read.height_offset_mm,
                 "Added to 16-bit depth after scaling (mm)")
       ->group("Input");
   c->add_option("--mask", args->mask, "Scan mask image; 0 = missing sample")
-      ->check(CLI::ExistingFile)->group("Input");
+      ->check(CLI::ExistingFile)
+      ->group("Input");
   c->add_option("--grid", args->grid, "WIDTH HEIGHT of a PLY point grid")
-      ->expected(2)->group("Input");
+      ->expected(2)
+      ->group("Input");
   AddPreprocessFlags(c, args->pipeline.preprocess);
   c->add_option("--method", args->method, "fast (variable projection) or ceres (reference)")
-      ->check(CLI::IsMember({"fast", "ceres"}))->capture_default_str()->group("Fit");
+      ->check(CLI::IsMember({"fast", "ceres"}))
+      ->capture_default_str()
+      ->group("Fit");
   c->add_option("--noise-sigma", args->pipeline.fit.fit.noise_sigma,
                 "Radiance noise per channel (linear units, 1 = white)")
-      ->capture_default_str()->group("Fit");
+      ->capture_default_str()
+      ->group("Fit");
   args->dark_ratio_option =
       c->add_option("--dark-outlier-ratio", args->pipeline.fit.dark_outlier_ratio,
                     "Samples below this share of the diffuse floor are unmodelled shadows")
-          ->capture_default_str()->group("Fit");
+          ->capture_default_str()
+          ->group("Fit");
   c->add_option("--rti-pitch-mm", args->pipeline.photo.rti_pixel_pitch_mm,
                 "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
                 "else 1 mm with a warning)")
@@ -95,7 +107,8 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
               "symbolic links); refused by default: a shared capture must not open other files")
       ->group("Photos");
   c->add_option("--threads", args->threads, "Worker threads (0 = all cores)")
-      ->capture_default_str()->group("Performance");
+      ->capture_default_str()
+      ->group("Performance");
   AddPackWriteFlags(c, args->pipeline.pack, args->quantised);
   c->callback([args, &exit_code] { exit_code = Run(*args); });
 }

@@ -1,14 +1,14 @@
-// Subcommands of the `digitize` tool (one cmd_*.cpp each; what they share is cli_common.cpp). Each Add*Command registers its flags on `app` and, when
-// chosen, stores its exit code in `exit_code`: 0 ok, 1 bad input or failure. Usage errors (an
-// unknown flag or command, a missing required option, a value of the wrong type) exit 1 too, with
-// CLI11's message (main.cpp maps its 105, 106, 109, ... onto 1); `--help` and `--version` exit 0;
-// 3 is an internal error (a broken invariant). Tools stay thin: flags -> options -> library call
+// Subcommands of the `digitize` tool (one cmd_*.cpp each; what they share is cli_common.cpp). Each
+// Add*Command registers its flags on `app` and, when chosen, stores its exit code in `exit_code`: 0
+// ok, 1 bad input or failure. Usage errors (an unknown flag or command, a missing required option,
+// a value of the wrong type) exit 1 too, with CLI11's message (main.cpp maps its 105, 106, 109, ...
+// onto 1); `--help` and `--version` exit 0; 3 is an internal error (a broken invariant). Tools stay
+// thin: flags -> options -> library call
 // -> exit code.
 #pragma once
 
 #include <CLI/CLI.hpp>
 #include <string>
-
 #include <vector>
 
 #include "digitize/pipeline.h"

@@ -26,6 +26,7 @@
 #include <filesystem>
 #include <string>
 #include <vector>
+
 #include "digitize/core.h"
 #include "digitize/height_field.h"
 #include "digitize/preprocess.h"

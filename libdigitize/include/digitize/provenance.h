@@ -18,8 +18,8 @@ namespace digitize {
 struct PackWriteOptions;  // pack.h
 
 struct PackInput {
-  std::string name;    // file name as given on the command line
-  std::string sha1;    // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
+  std::string name;  // file name as given on the command line
+  std::string sha1;  // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
   uint64_t bytes = 0;
 };
 
