@@ -12,6 +12,7 @@ set(DIGITIZE_IO_SOURCES
   output_dir.cpp
   scan_io.cpp     # OpenMesh (PLY)
   json_fields.cpp # the one JSON field reader (private json_fields.h)
+  transform_json.cpp  # RigidTransform to and from JSON
 )
 
 set(DIGITIZE_CANVAS_HEADERS scan.h canvas.h resample.h)
@@ -63,10 +64,16 @@ set(DIGITIZE_SAMPLES_SOURCES
   reflectance_fit.cpp
 )
 
-set(DIGITIZE_PACK_HEADERS pack.h)
+set(DIGITIZE_PACK_HEADERS pack.h provenance.h)
 set(DIGITIZE_PACK_SOURCES
-  pack.cpp        # OpenImageIO (multi-part OpenEXR, SHA-1)
+  pack.cpp         # the model, its validation and encodings
+  pack_write.cpp   # OpenImageIO: WritePack (multi-part OpenEXR)
+  pack_read.cpp    # OpenImageIO: the bounded reader (header pre-scan, ReadPack, InspectPack)
+  pack_verify.cpp  # VerifyPack (SHA-1 of the pixels)
+  provenance.cpp   # where a pack came from, and its JSON form
 )
 
-set(DIGITIZE_PIPELINE_HEADERS)
-set(DIGITIZE_PIPELINE_SOURCES)
+set(DIGITIZE_PIPELINE_HEADERS pipeline.h)
+set(DIGITIZE_PIPELINE_SOURCES
+  pipeline.cpp     # scan -> canvas -> fit -> pack, as the commands run it
+)

@@ -4,11 +4,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "digitize/image_io.h"
+#include "json_fields.h"
+#include "options_json.h"
 
 namespace digitize {
 namespace {
@@ -39,13 +40,6 @@ bool AllFinite(const Grid<T>& grid) {
     }
   }
   return true;
-}
-
-nlohmann::json TransformJson(const RigidTransform& t) {
-  nlohmann::json rotation = nlohmann::json::array();
-  for (int r = 0; r < 3; ++r) rotation.push_back({t.rotation(r, 0), t.rotation(r, 1), t.rotation(r, 2)});
-  return {{"rotation", rotation},
-          {"translation_mm", {t.translation.x(), t.translation.y(), t.translation.z()}}};
 }
 
 }  // namespace
@@ -164,6 +158,32 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   return result;
 }
 
+nlohmann::json ToJson(const PreprocessOptions& options) {
+  return {{"sanitize",
+           {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
+            {"spike_mm", options.sanitize.spike_mm}}},
+          {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
+          {"canvas",
+           {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
+            {"stop_slope", options.canvas.stop_slope},
+            {"refine_step_mm", options.canvas.refine_step_mm},
+            {"refine_px", options.canvas.refine_px},
+            {"erode_px", options.canvas.erode_px},
+            {"trim_sigmas", options.canvas.trim_sigmas},
+            {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
+          {"resample",
+           {{"pitch_mm", options.resample.pitch_mm},
+            {"max_edge_factor", options.resample.max_edge_factor},
+            {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
+          {"relief",
+           {{"delta0_fraction", options.relief.delta0_fraction},
+            {"min_component_area_mm2", options.relief.min_component_area_mm2},
+            {"cell_px", options.relief.cell_px},
+            {"cover_px", options.relief.cover_px},
+            {"min_relief_mm", options.relief.min_relief_mm},
+            {"noise_margin_from_scan", options.noise_margin_from_scan}}}};
+}
+
 std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
                                  const std::vector<std::string>& inputs) {
   using nlohmann::json;
@@ -200,7 +220,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"outline_fitted", c.outline_fitted},
         {"outline_note", c.outline_note},
         {"hidden_edges", c.hidden_edges},
-        {"canvas_from_scan", TransformJson(c.canvas_from_scan)}}},
+        {"canvas_from_scan", ToJson(c.canvas_from_scan)}}},
       {"warnings", c.warnings},
       {"resample",
        {{"pitch_mm", result.field.pitch_mm},
@@ -221,30 +241,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"texels_above", result.relief.texels_above},
         {"components_kept", result.relief.components_kept},
         {"components_removed", result.relief.components_removed}}},
-      {"options",
-       {{"sanitize",
-         {{"max_abs_coordinate_mm", options.sanitize.max_abs_coordinate_mm},
-          {"spike_mm", options.sanitize.spike_mm}}},
-        {"merge", {{"disagree_mm", options.merge.disagree_mm}}},
-        {"canvas",
-         {{"stop_gradient_mm", options.canvas.stop_gradient_mm},
-          {"stop_slope", options.canvas.stop_slope},
-          {"refine_step_mm", options.canvas.refine_step_mm},
-          {"refine_px", options.canvas.refine_px},
-          {"erode_px", options.canvas.erode_px},
-          {"trim_sigmas", options.canvas.trim_sigmas},
-          {"seed_px", {options.canvas.seed_x, options.canvas.seed_y}}}},
-        {"resample",
-         {{"pitch_mm", options.resample.pitch_mm},
-          {"max_edge_factor", options.resample.max_edge_factor},
-          {"max_hole_area_mm2", options.resample.max_hole_area_mm2}}},
-        {"relief",
-         {{"delta0_fraction", options.relief.delta0_fraction},
-          {"min_component_area_mm2", options.relief.min_component_area_mm2},
-          {"cell_px", options.relief.cell_px},
-          {"cover_px", options.relief.cover_px},
-          {"min_relief_mm", options.relief.min_relief_mm},
-          {"noise_margin_from_scan", options.noise_margin_from_scan}}}}},
+      {"options", ToJson(options)},
   };
   return report.dump(2) + "\n";
 }
@@ -301,14 +298,14 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
                     {"boxes", boxes}};
   if (Status s = WriteTextFile(dir / "boxes.json", boxes_doc.dump(1) + "\n"); !s.ok()) return s;
 
-  json transform = {{"format", "digitize.transform"},
-                    {"version", 1},
-                    {"canvas_from_scan", TransformJson(result.canvas.canvas_from_scan)},
-                    {"pitch_mm", f.pitch_mm},
-                    {"size_texels", {f.width(), f.height()}},
-                    {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
-                    {"texel_centre",
-                     "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
+  json transform = {
+      {"format", "digitize.transform"},
+      {"version", 1},
+      {"canvas_from_scan", ToJson(result.canvas.canvas_from_scan)},
+      {"pitch_mm", f.pitch_mm},
+      {"size_texels", {f.width(), f.height()}},
+      {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
+      {"texel_centre", "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
   if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
 
   return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
@@ -317,6 +314,64 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
 }  // namespace digitize
 
 namespace digitize {
+namespace {
+
+// A canvas folder's JSON file (docs/formats.md), whose "format" must be `format`.
+nlohmann::json ReadFormatFile(const std::filesystem::path& path, const char* format) {
+  auto text = ReadTextFile(path, std::string(format) + " file");
+  if (!text.ok()) Fail(text.error().message);
+  nlohmann::json doc = ParseJson(*text, path.string());
+  if (!doc.is_object() || !doc.contains("format") || doc["format"] != format)
+    Fail(path.string() + ": not a " + format + " file");
+  return doc;
+}
+
+// transform.json: the pitch and canvas_from_scan.
+void ReadTransformFile(const std::filesystem::path& path, PreprocessedCanvas& out) {
+  const std::string file = path.string();
+  const nlohmann::json doc = ReadFormatFile(path, "digitize.transform");
+  const Fields top(doc, file);
+  const double pitch = top.Number("pitch_mm");
+  if (!(pitch > 0)) Fail(file + ": pitch_mm must be > 0, got " + FormatNumber(pitch));
+  out.field.pitch_mm = pitch;
+  out.canvas_from_scan = TransformFrom(top.Object("canvas_from_scan"));
+  const Mat3d& R = out.canvas_from_scan.rotation;
+  if ((R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
+    Fail(file + ": canvas_from_scan.rotation is not a rotation");
+}
+
+// boxes.json: the bump plane, H, the cell size and the boxes, each inside the w x h grid.
+void ReadBoxesFile(const std::filesystem::path& path, int w, int h, PreprocessedCanvas& out) {
+  const std::string file = path.string();
+  const nlohmann::json doc = ReadFormatFile(path, "digitize.boxes");
+  const Fields top(doc, file);
+  constexpr int64_t kIntMax = std::numeric_limits<int>::max();
+  out.delta0_mm = top.Number("delta0_mm");
+  out.max_height_mm = top.Number("max_height_mm");
+  out.cell_px = static_cast<int>(top.Integer("cell_px", -kIntMax, kIntMax));
+  if (out.cell_px < 1) Fail(file + ": delta0_mm, max_height_mm must be finite, cell_px >= 1");
+  const nlohmann::json& boxes = top.Array("boxes");
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    const Fields b(boxes[i], file + ": boxes[" + std::to_string(i) + "]");
+    ReliefBox box;
+    for (auto [key, target] : {std::pair<const char*, int*>{"x0", &box.x0},
+                               {"y0", &box.y0},
+                               {"width", &box.width},
+                               {"height", &box.height},
+                               {"u_max", &box.u_max},
+                               {"v_max", &box.v_max}})
+      *target = static_cast<int>(b.Integer(key, -kIntMax, kIntMax));
+    box.h_max_mm = static_cast<float>(b.Number("h_max_mm"));
+    if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
+        int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
+        !std::isfinite(box.h_max_mm))
+      Fail(file + ": box " + std::to_string(i) + " is not inside the " + std::to_string(w) + "x" +
+           std::to_string(h) + " grid");
+    out.boxes.push_back(box);
+  }
+}
+
+}  // namespace
 
 Status CheckCanvasFolder(const std::filesystem::path& dir) {
   std::error_code ec;
@@ -385,64 +440,12 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
     out.normals.data[i] = n;
   }
 
-  const auto transform_path = dir / "transform.json";
-  std::ifstream file(transform_path);
-  if (!file) return Error{transform_path.string() + ": cannot open"};
-  std::stringstream text;
-  text << file.rdbuf();
-  try {
-    const nlohmann::json doc = nlohmann::json::parse(text.str());
-    if (doc.value("format", "") != "digitize.transform")
-      return Error{transform_path.string() + ": not a digitize.transform file"};
-    const double pitch = doc.at("pitch_mm").get<double>();
-    if (!(std::isfinite(pitch) && pitch > 0))
-      return Error{transform_path.string() + ": pitch_mm must be > 0, got " + FormatNumber(pitch)};
-    out.field.pitch_mm = pitch;
-    const auto& t = doc.at("canvas_from_scan");
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) out.canvas_from_scan.rotation(r, c) = t.at("rotation").at(r).at(c);
-    for (int r = 0; r < 3; ++r) out.canvas_from_scan.translation(r) = t.at("translation_mm").at(r);
-  } catch (const nlohmann::json::exception& e) {
-    return Error{transform_path.string() + ": " + e.what()};
-  }
-  const Mat3d& R = out.canvas_from_scan.rotation;
-  if (!R.allFinite() || !out.canvas_from_scan.translation.allFinite() ||
-      (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
-    return Error{transform_path.string() + ": canvas_from_scan.rotation is not a rotation"};
-
-  const auto boxes_path = dir / "boxes.json";
-  std::ifstream boxes_file(boxes_path);
-  if (!boxes_file) return Error{boxes_path.string() + ": cannot open"};
-  std::stringstream boxes_text;
-  boxes_text << boxes_file.rdbuf();
-  try {
-    const nlohmann::json doc = nlohmann::json::parse(boxes_text.str());
-    if (doc.value("format", "") != "digitize.boxes")
-      return Error{boxes_path.string() + ": not a digitize.boxes file"};
-    out.delta0_mm = doc.at("delta0_mm").get<double>();
-    out.max_height_mm = doc.at("max_height_mm").get<double>();
-    out.cell_px = doc.at("cell_px").get<int>();
-    if (!(std::isfinite(out.delta0_mm) && std::isfinite(out.max_height_mm) && out.cell_px >= 1))
-      return Error{boxes_path.string() + ": delta0_mm, max_height_mm must be finite, cell_px >= 1"};
-    for (const auto& b : doc.at("boxes")) {
-      ReliefBox box;
-      box.x0 = b.at("x0").get<int>();
-      box.y0 = b.at("y0").get<int>();
-      box.width = b.at("width").get<int>();
-      box.height = b.at("height").get<int>();
-      box.h_max_mm = b.at("h_max_mm").get<float>();
-      box.u_max = b.at("u_max").get<int>();
-      box.v_max = b.at("v_max").get<int>();
-      if (box.x0 < 0 || box.y0 < 0 || box.width < 1 || box.height < 1 ||
-          int64_t{box.x0} + box.width > w || int64_t{box.y0} + box.height > h ||
-          !std::isfinite(box.h_max_mm))
-        return Error{boxes_path.string() + ": box " + std::to_string(out.boxes.size()) +
-                     " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
-      out.boxes.push_back(box);
-    }
-  } catch (const nlohmann::json::exception& e) {
-    return Error{boxes_path.string() + ": " + e.what()};
-  }
+  const Result<bool> json_read = CatchBadInput([&] {
+    ReadTransformFile(dir / "transform.json", out);
+    ReadBoxesFile(dir / "boxes.json", w, h, out);
+    return true;
+  });
+  if (!json_read.ok()) return json_read.error();
   return out;
 }
 

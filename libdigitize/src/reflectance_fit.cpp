@@ -11,6 +11,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
+#include "options_json.h"
 
 namespace digitize {
 namespace {
@@ -282,6 +283,23 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
   return result;
 }
 
+nlohmann::json ToJson(const ReflectanceFitOptions& options) {
+  const BrdfFitOptions& f = options.fit;
+  return {{"method", f.method == BrdfFitMethod::kFast ? "fast" : "ceres"},
+          {"noise_sigma", f.noise_sigma},
+          {"min_samples", f.min_samples},
+          {"k_min", f.k_min},
+          {"k_max", f.k_max},
+          {"max_specular_albedo", f.max_specular_albedo},
+          {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
+          {"min_cos", options.samples.min_cos},
+          {"shadow_rays", options.samples.shadow_rays},
+          {"visibility_rays", options.samples.visibility_rays},
+          {"skip_unblockable", options.samples.trace.skip_unblockable},
+          {"dark_outlier_ratio", options.dark_outlier_ratio},
+          {"dark_outlier_sigmas", options.dark_outlier_sigmas}};
+}
+
 std::string ReflectanceReportJson(const ReflectanceFitResult& result,
                                   const ReflectanceFitOptions& options,
                                   const std::vector<std::string>& inputs) {
@@ -294,7 +312,6 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
   auto rays = [](const TraceStats& t) {
     return json{{"rays", t.rays}, {"skipped", t.skipped}, {"traced", t.traced}, {"blocked", t.blocked}};
   };
-  const BrdfFitOptions& f = options.fit;
   json doc = {{"format", "digitize.fit_report"},
               {"version", 1},
               {"tool_version", DIGITIZE_VERSION},
@@ -341,20 +358,7 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
                 {"samples", r.seconds_samples},
                 {"fit", r.seconds_fit},
                 {"total", r.seconds_total}}},
-              {"options",
-               {{"method", f.method == BrdfFitMethod::kFast ? "fast" : "ceres"},
-                {"noise_sigma", f.noise_sigma},
-                {"min_samples", f.min_samples},
-                {"k_min", f.k_min},
-                {"k_max", f.k_max},
-                {"max_specular_albedo", f.max_specular_albedo},
-                {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
-                {"min_cos", options.samples.min_cos},
-                {"shadow_rays", options.samples.shadow_rays},
-                {"visibility_rays", options.samples.visibility_rays},
-                {"skip_unblockable", options.samples.trace.skip_unblockable},
-                {"dark_outlier_ratio", options.dark_outlier_ratio},
-                {"dark_outlier_sigmas", options.dark_outlier_sigmas}}}};
+              {"options", ToJson(options)}};
   return doc.dump(2) + "\n";
 }
 

@@ -1,3 +1,4 @@
+// `digitize demo`: the whole pipeline on a synthetic painting, judged against its ground truth.
 #include <algorithm>
 #include <cstdio>
 #include <memory>
@@ -5,9 +6,6 @@
 
 #include "commands.h"
 #include "digitize/output_dir.h"
-#include "digitize/pack.h"
-#include "digitize/preprocess.h"
-#include "digitize/reflectance_fit.h"
 #include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
@@ -170,27 +168,18 @@ int RunDemo(const DemoArgs& args) {
     // the files: what a museum keeps is what is measured.
     PackWriteOptions quantised = args.quantised;
     quantised.encoding = PackEncoding::kQuantised;
-    auto canvas = ReadPreprocessOutputs(dir / "canvas");
-    if (!canvas.ok()) return Status(canvas.error());
-    auto maps = ReadReflectanceMaps(dir / "fit");
-    if (!maps.ok()) return Status(maps.error());
     for (const auto& [name, options] : {std::pair<std::string, PackWriteOptions>{"painting.pack.exr", {}},
                                         {"painting.q.pack.exr", quantised}}) {
-      auto provenance = ProvenanceFromOutputs(dir / "canvas", dir / "fit", PackOptionsJson(options));
-      if (!provenance.ok()) return Status(provenance.error());
-      auto pack = AssemblePack(*canvas, *maps, std::move(provenance).value());
-      if (!pack.ok()) return Status(pack.error());
-      if (Status s = WritePack(dir / name, *pack, options); !s.ok()) return s;
+      auto summary = PackFromFolders(dir / "canvas", dir / "fit", dir / name, options);
+      if (!summary.ok()) return Status(summary.error());
       auto read = ReadPack(dir / name);
       if (!read.ok()) return Status(read.error());
-      auto summary = InspectPack(dir / name);
-      if (!summary.ok()) return Status(summary.error());
       auto score = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan,
                                    photos->held_out, photos->held_out_mask);
       if (!score.ok()) return Status(score.error());
       packs.push_back({name, *summary, *score});
     }
-    // The demo ends in the gallery (issue 5): the pack just written, read back as the viewer
+    // The demo ends in the gallery: the pack just written, read back as the viewer
     // reads it and hung in the virtual room, rendered headless (EGL surfaceless). No GL here is
     // a warning, not a failure: the digitization itself is done.
     const std::filesystem::path pack_path = dir / "painting.pack.exr";

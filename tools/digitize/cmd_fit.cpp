@@ -1,55 +1,27 @@
+// `digitize fit`: a canvas folder (or an RTI capture alone) + photos -> a fit folder.
 #include <cstdio>
 #include <memory>
 #include <optional>
 
 #include "commands.h"
 #include "digitize/output_dir.h"
-#include "digitize/photo_set.h"
-#include "digitize/preprocess.h"
-#include "digitize/reflectance_fit.h"
 #include "progress_bar.h"
 
 namespace digitize::cli {
 namespace {
 
-// The canvas a photo set is fitted on: a preprocess output folder, or for an RTI capture without
-// one, the flat canvas of its image grid.
-Result<PreprocessedCanvas> LoadCanvas(const FitArgs& args, const PhotoSet& set) {
-  if (!args.canvas.empty()) return ReadPreprocessOutputs(args.canvas);
-  if (!set.is_rti)
-    return Error{"--canvas is required for a calibration file (" + args.photos +
-                 "); only an RTI capture (.lp) can be fitted on a flat canvas without one"};
-  auto flat = FlatCanvasForRti(set);
-  if (!flat.ok()) return flat.error();
-  PreprocessedCanvas c;
-  c.field = std::move(flat).value();
-  c.normals = Grid<Vec3f>(c.field.width(), c.field.height(), Vec3f::UnitZ());
-  return c;
-}
-
-}  // namespace
-
-Result<PhotoSet> ReadPhotoSetFile(const std::string& path, const PhotoSetOptions& o,
-                                  const ProgressCallback& progress) {
-  const std::filesystem::path p(path);
-  if (p.extension() == ".lp" || p.extension() == ".LP") return ReadRtiCapture(p, o, progress);
-  return ReadCalibration(p, o, progress);
-}
-
-void PrintRtiPitch(const std::string& command, const PhotoSet& set) {
-  if (!set.is_rti) return;
-  if (set.rti_pitch_assumed)
-    std::fprintf(stderr, "digitize %s: warning: RTI pixel pitch %g mm %s; give --rti-pitch-mm\n",
-                 command.c_str(), set.rti_pitch_mm, set.rti_pitch_source.c_str());
-  else
-    std::printf("RTI pixel pitch: %g mm, %s\n", set.rti_pitch_mm, set.rti_pitch_source.c_str());
-}
+struct FitArgs {
+  std::string canvas, photos, held_out, out;
+  std::string method = "fast";
+  PhotoSetOptions photo;
+  ReflectanceFitOptions options;
+  int threads = 0;
+  CLI::Option* dark_ratio_option = nullptr;  // set: the user chose it (RTI default is off)
+};
 
 int RunFit(FitArgs args) {
   const std::string cmd = "fit";
-  args.options.fit.method = args.method == "ceres" ? BrdfFitMethod::kCeresReference : BrdfFitMethod::kFast;
-  args.options.fit.num_threads = args.threads;
-  args.options.samples.trace.num_threads = args.threads;
+  SetFitMethod(args.options, args.method, args.threads);
   if (Status s = args.photo.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
   // Before the photos are loaded: an incomplete canvas folder fails in a moment, not a minute.
@@ -59,12 +31,8 @@ int RunFit(FitArgs args) {
   ProgressBar bar("fit");
   Result<PhotoSet> set = ReadPhotoSetFile(args.photos, args.photo, bar.Callback());
   if (!set.ok()) return Fail(cmd, set.error().message);
-  // RTI captures have uncalibrated light intensities (a hand-held light's distance varies), so a
-  // dim light looks like a shadow to the unmodelled-shadow test: off unless asked for.
-  if (set->is_rti && (args.dark_ratio_option == nullptr || args.dark_ratio_option->count() == 0)) {
-    args.options.dark_outlier_ratio = 0;
-    args.options.dark_outlier_fit_ratio = 0;
-  }
+  args.options = FitOptionsFor(
+      *set, args.options, args.dark_ratio_option != nullptr && args.dark_ratio_option->count() > 0);
   // Held-out photos read before the fit: a bad file fails before minutes of work, and its
   // images are inputs the output must not touch.
   std::optional<PhotoSet> held;
@@ -81,7 +49,7 @@ int RunFit(FitArgs args) {
     for (const Photo& p : held->photos) output.inputs.push_back(p.path);
   }
   if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
-  Result<PreprocessedCanvas> canvas = LoadCanvas(args, *set);
+  Result<PreprocessedCanvas> canvas = LoadFitCanvas(args.canvas, *set);
   if (!canvas.ok()) return Fail(cmd, canvas.error().message);
   Result<ReflectanceFitResult> result = FitReflectance(
       canvas->field, canvas->normals, canvas->canvas_from_scan, *set, args.options, bar.Callback());
@@ -118,6 +86,8 @@ int RunFit(FitArgs args) {
               "report.json)\n", args.out.c_str());
   return 0;
 }
+
+}  // namespace
 
 void AddFitCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FitArgs>();

@@ -1,74 +1,11 @@
 // `digitize pack`, `digitize inspect`, `digitize verify`: texture packs (docs/formats.md).
 #include <cstdio>
 #include <memory>
-#include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "digitize/image_io.h"
-#include "digitize/output_dir.h"
-#include "digitize/pack.h"
-#include "digitize/reflectance_fit.h"
 
 namespace digitize::cli {
-
-std::string PackOptionsJson(const PackWriteOptions& o) {
-  nlohmann::json j = {{"encoding", ToString(o.encoding)}};
-  if (o.encoding == PackEncoding::kQuantised)
-    j["mantissa_bits"] = {{"height", o.quantisation.height_bits},
-                          {"normal", o.quantisation.normal_bits},
-                          {"rho", o.quantisation.rho_bits},
-                          {"lobe", o.quantisation.lobe_bits}};
-  return j.dump();
-}
-
-void PrintPackSummaryLine(const std::string& path, const PackSummary& s) {
-  std::printf("%s: %dx%d texels (%.1f x %.1f mm), %zu boxes, %s, %.2f bytes/texel (%llu bytes)\n",
-              EscapeForTerminal(path).c_str(), s.width, s.height, s.width * s.pitch_mm,
-              s.height * s.pitch_mm, s.box_count, ToString(s.encoding), s.BytesPerTexel(),
-              static_cast<unsigned long long>(s.file_bytes));
-}
-
-void AddPackWriteFlags(CLI::App* c, PackWriteOptions& o, bool& quantised) {
-  c->add_flag("--quantised", quantised,
-              "Drop low mantissa bits per channel group (smaller; stated error, docs/formats.md)")
-      ->group("Pack");
-  c->add_option("--height-bits", o.quantisation.height_bits, "Quantised: mantissa bits of height (0-10)")
-      ->capture_default_str()->group("Pack");
-  c->add_option("--normal-bits", o.quantisation.normal_bits, "Quantised: mantissa bits of nx, ny")
-      ->capture_default_str()->group("Pack");
-  c->add_option("--rho-bits", o.quantisation.rho_bits, "Quantised: mantissa bits of rho_d, rho_s")
-      ->capture_default_str()->group("Pack");
-  c->add_option("--lobe-bits", o.quantisation.lobe_bits, "Quantised: mantissa bits of cx, cy, k")
-      ->capture_default_str()->group("Pack");
-}
-
-int PackFromFolders(const std::string& cmd, const std::string& canvas_dir, const std::string& fit_dir,
-                    const std::string& out, PackWriteOptions options) {
-  if (Status s = options.Validate(); !s.ok()) return Fail(cmd, s.message());
-  if (Status s = CheckOutputPath(out, {canvas_dir, fit_dir}); !s.ok())
-    return Fail(cmd, s.message());
-  auto maps = ReadReflectanceMaps(fit_dir);
-  if (!maps.ok()) return Fail(cmd, maps.error().message);
-  PreprocessedCanvas canvas;
-  if (!canvas_dir.empty()) {
-    auto c = ReadPreprocessOutputs(canvas_dir);
-    if (!c.ok()) return Fail(cmd, c.error().message);
-    canvas = std::move(c).value();
-  } else {
-    // An RTI fit without a canvas folder: the flat canvas of its texel grid, pitch from the fit.
-    return Fail(cmd, "--canvas is required (for an RTI capture, preprocess a height map or use "
-                     "`digitize run --photos capture.lp`)");
-  }
-  auto provenance = ProvenanceFromOutputs(canvas_dir, fit_dir, PackOptionsJson(options));
-  if (!provenance.ok()) return Fail(cmd, provenance.error().message);
-  auto pack = AssemblePack(std::move(canvas), std::move(maps).value(), std::move(provenance).value());
-  if (!pack.ok()) return Fail(cmd, fit_dir + ": " + pack.error().message);
-  if (Status s = WritePack(out, *pack, options); !s.ok()) return Fail(cmd, s.message());
-  auto summary = InspectPack(out);
-  if (!summary.ok()) return Fail(cmd, summary.error().message);
-  PrintPackSummaryLine(out, *summary);
-  return 0;
-}
 
 void AddPackCommand(CLI::App& app, int& exit_code) {
   struct Args {
@@ -92,7 +29,13 @@ void AddPackCommand(CLI::App& app, int& exit_code) {
   c->callback([args, &exit_code] {
     PackWriteOptions o = args->options;
     o.encoding = args->quantised ? PackEncoding::kQuantised : PackEncoding::kHalf;
-    exit_code = PackFromFolders("pack", args->canvas, args->fit, args->out, o);
+    auto summary = PackFromFolders(args->canvas, args->fit, args->out, o);
+    if (!summary.ok()) {
+      exit_code = Fail("pack", summary.error().message);
+      return;
+    }
+    PrintPackSummaryLine(args->out, *summary);
+    exit_code = 0;
   });
 }
 
@@ -115,42 +58,7 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
     }
     const PackProvenance& p = s->provenance;
     if (args->json) {
-      nlohmann::json inputs = nlohmann::json::array();
-      for (const PackInput& in : p.inputs)
-        inputs.push_back({{"name", in.name}, {"sha1", in.sha1}, {"bytes", in.bytes}});
-      nlohmann::json j = {
-          {"file", args->pack},
-          {"format", kPackFormatName},
-          {"version", s->version},
-          {"size_texels", {s->width, s->height}},
-          {"pitch_mm", s->pitch_mm},
-          {"size_mm", {s->width * s->pitch_mm, s->height * s->pitch_mm}},
-          {"delta0_mm", s->delta0_mm},
-          {"max_height_mm", s->max_height_mm},
-          {"cell_px", s->cell_px},
-          {"boxes", s->box_count},
-          {"encoding", ToString(s->encoding)},
-          {"file_bytes", s->file_bytes},
-          {"bytes_per_texel", s->BytesPerTexel()},
-          {"raw_bytes_per_texel", s->raw_bytes_per_texel},
-          {"gauge", s->gauge},
-          {"provenance",
-           {{"tool_version", p.tool_version},
-            {"created_utc", p.created_utc},
-            {"fit_brief", p.fit_brief},
-            {"options", nlohmann::json::parse(p.options_json.empty() ? "{}" : p.options_json,
-                                              nullptr, false)},
-            {"inputs", inputs}}}};
-      if (s->encoding == PackEncoding::kQuantised)
-        j["mantissa_bits"] = {{"height", s->quantisation.height_bits},
-                              {"normal", s->quantisation.normal_bits},
-                              {"rho", s->quantisation.rho_bits},
-                              {"lobe", s->quantisation.lobe_bits}};
-      // ASCII only (\uXXXX for the rest, so no control character reaches the terminal), and
-      // bytes that are not UTF-8 (a file name) replaced rather than thrown on.
-      std::printf(
-          "%s\n",
-          j.dump(2, ' ', /*ensure_ascii=*/true, nlohmann::json::error_handler_t::replace).c_str());
+      std::printf("%s\n", PackSummaryJson(args->pack, *s).c_str());
     } else {
       PrintPackSummaryLine(args->pack, *s);
       std::printf("  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",

@@ -6,19 +6,6 @@
 #include "commands.h"
 #include "digitize/core.h"
 
-namespace digitize::cli {
-
-int Fail(const std::string& command, const std::string& message) {
-  std::fprintf(stderr, "digitize %s: error: %s\n", command.c_str(), message.c_str());
-  return 1;
-}
-
-void Warn(const std::string& command, const std::string& message) {
-  std::fprintf(stderr, "digitize %s: warning: %s\n", command.c_str(), message.c_str());
-}
-
-}  // namespace digitize::cli
-
 int main(int argc, char** argv) {
   CLI::App app{
       "digitize: turn a scanned painting into a compact, relightable, real-time digital copy.\n"

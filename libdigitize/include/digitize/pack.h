@@ -1,4 +1,4 @@
-// Texture packs (issue 4; SPEC step 7, paper 001 section 6): one self-describing file per
+// Texture packs (paper 001 section 6): one self-describing file per
 // painting holding everything the viewer needs -- height, normals, reflectance maps, relief boxes,
 // physical size, gauge and provenance. What a museum keeps and ships.
 //
@@ -26,9 +26,11 @@
 #include <filesystem>
 #include <string>
 #include <vector>
+
 #include "digitize/core.h"
 #include "digitize/height_field.h"
 #include "digitize/preprocess.h"
+#include "digitize/provenance.h"
 #include "digitize/reflectance_maps.h"
 #include "digitize/relief.h"
 
@@ -50,20 +52,6 @@ inline constexpr double kPackRotationTolerance = 1e-4;
 // digitize:size_mm against pitch x texels, relative (the writer stores both in shortest
 // round-trip form, so a pack it wrote agrees exactly).
 inline constexpr double kPackSizeTolerance = 1e-9;
-
-struct PackInput {
-  std::string name;    // file name as given on the command line
-  std::string sha1;    // hex digest of the file's bytes ("" when not hashed, e.g. in memory)
-  uint64_t bytes = 0;
-};
-
-struct PackProvenance {
-  std::string tool_version;       // "digitize 0.4.0"
-  std::string created_utc;        // ISO 8601, "2026-11-30T09:30:00Z"
-  std::string fit_brief;          // the fit's one-line brief
-  std::string options_json;       // JSON object: the options of the stages that made the pack
-  std::vector<PackInput> inputs;  // scan(s), calibration, photos, canvas and fit folders' files
-};
 
 // A painting, ready for the viewer. Same grid for every map (the HeightField's).
 struct Pack {
@@ -167,28 +155,9 @@ struct PackVerification {
 Result<PackVerification> VerifyPack(const std::filesystem::path& path,
                                     const PackReadOptions& options = {});
 
-// Tool version and the time now (UTC, ISO 8601); the rest empty.
-PackProvenance NewProvenance();
-
-// Appends each file with its SHA-1 and size. Names: relative to the folder `relative_to` (e.g.
-// the calibration file's: "images/img_000.png", "../scans/scan.exr"), never an absolute path of
-// the capturing machine (a pack is shared; its provenance should not tell where the files lay);
-// with relative_to empty, a relative name as given and an absolute one as its file name.
-// Error names the file.
-Status AddProvenanceInputs(PackProvenance& provenance,
-                           const std::vector<std::filesystem::path>& files,
-                           const std::filesystem::path& relative_to = {});
-
-// Provenance of a pack made from a `digitize preprocess` folder and a `digitize fit` folder (either
-// may be empty: an RTI capture has no canvas folder): every file of both hashed (named
-// "<folder>/<file>"), the fit's brief, both stages' options and their own inputs (their
-// report.json; absolute paths there reduced to their file names, as AddProvenanceInputs),
-// `pack_options` (a JSON object), the tool version and the time now (UTC).
-Result<PackProvenance> ProvenanceFromOutputs(const std::filesystem::path& canvas_dir,
-                                             const std::filesystem::path& fit_dir,
-                                             const std::string& pack_options_json);
-
-// SHA-1 of a file's bytes (provenance), hex. Error names the file.
-Result<std::string> FileSha1(const std::filesystem::path& path);
+// `digitize inspect --json`: the summary of the pack file `file` as JSON text, ASCII only
+// (\uXXXX for the rest, so no control character reaches a terminal; bytes that are not UTF-8,
+// e.g. a file name, replaced).
+std::string PackSummaryJson(const std::string& file, const PackSummary& summary);
 
 }  // namespace digitize

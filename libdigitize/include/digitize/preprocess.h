@@ -1,5 +1,6 @@
 // "Preprocess scanned height maps": scan exposures -> canvas height field, normals, relief boxes,
-// and a report. Strings the stages together (SPEC steps 1-4) and times each step.
+// and a report. Strings the stages together (paper 001 sections 4-5: canvas frame and extraction,
+// relief, normals) and times each step.
 #pragma once
 
 #include <array>

@@ -1,4 +1,4 @@
-// "Fit BRDF textures from photo sets" (SPEC steps 5-6; issue 3): canvas + registered photos ->
+// "Fit BRDF textures from photo sets" (paper 001 section 5): canvas + registered photos ->
 // per-texel reflectance maps with a status per texel and a report.
 //
 // Layer: samples (reflectance_samples.h, brdf_fit.h, reflectance_maps.h).

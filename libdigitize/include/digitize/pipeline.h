@@ -1,0 +1,91 @@
+// The pipeline end to end: what the `digitize` commands run, so that each command only parses its
+// flags into these options and calls one function here (docs/architecture.md).
+//
+// Layer: pipeline (everything below it: scan_io, preprocess, photo_set, reflectance_fit, pack).
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/pack.h"
+#include "digitize/photo_set.h"
+#include "digitize/preprocess.h"
+#include "digitize/reflectance_fit.h"
+#include "digitize/scan_io.h"
+
+namespace digitize {
+
+// A photo set file: by its .lp (or .LP) extension an RTI capture (ReadRtiCapture), otherwise a
+// calibration JSON (ReadCalibration).
+Result<PhotoSet> ReadPhotoSetFile(const std::filesystem::path& path, const PhotoSetOptions& options,
+                                  const ProgressCallback& progress = nullptr);
+
+// Every scan read with `options` (mask and grid included); options validated first. Errors name
+// the file or the option.
+Result<std::vector<Scan>> ReadScans(const std::vector<std::string>& paths,
+                                    const ScanReadOptions& options);
+
+// What the fit and the pack take from a preprocess result (as ReadPreprocessOutputs reads it
+// from its folder).
+PreprocessedCanvas CanvasFromPreprocess(const PreprocessResult& result);
+
+// The flat canvas of an RTI capture's image grid (FlatCanvasForRti), normals straight up, no
+// boxes. Error: not an RTI capture, or its images disagree in size.
+Result<PreprocessedCanvas> FlatCanvasFor(const PhotoSet& rti);
+
+// The canvas `digitize fit` fits on: the canvas folder, or with none an RTI capture's flat
+// canvas. Error: neither (a calibration file needs a canvas), or the folder's read error.
+Result<PreprocessedCanvas> LoadFitCanvas(const std::filesystem::path& canvas_dir,
+                                         const PhotoSet& set);
+
+// RTI captures have uncalibrated light intensities (a hand-held light's distance varies), so a
+// dim light looks like a shadow to the unmodelled-shadow test: for them it is off unless the
+// user chose a ratio. Calibrated sets keep `options` as they are.
+ReflectanceFitOptions FitOptionsFor(const PhotoSet& set, ReflectanceFitOptions options,
+                                    bool dark_outlier_ratio_chosen);
+
+// `digitize pack`: a canvas folder and a fit folder -> a pack file at `out` (written atomically,
+// never over an input), its provenance from the folders. Returns the written pack's summary.
+Result<PackSummary> PackFromFolders(const std::filesystem::path& canvas_dir,
+                                    const std::filesystem::path& fit_dir,
+                                    const std::filesystem::path& out,
+                                    const PackWriteOptions& options);
+
+// `digitize run`: scan(s) + photos -> pack in one go.
+struct PipelineOptions {
+  std::vector<std::string> scans;  // none: an RTI capture, packed on its flat canvas
+  ScanReadOptions read;            // mask and PLY grid included
+  PreprocessOptions preprocess;
+  std::string photos;    // calibration JSON or RTI .lp
+  std::string held_out;  // optional: photos not fitted, relit from the written pack
+  PhotoSetOptions photo;
+  ReflectanceFitOptions fit;
+  bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
+  PackWriteOptions pack;
+  std::string out;   // the pack file
+  std::string work;  // optional: the canvas/ and fit/ folders are also written here
+  // Each part's Validate, in the order the run would need them; the message says which.
+  Status Validate() const;
+};
+
+struct PipelineResult {
+  std::optional<PreprocessResult> preprocessed;  // empty for an RTI capture without a scan
+  PhotoSet photos;
+  ReflectanceFitReport fit;
+  std::optional<HeldOutScore> held_out;  // relit from the pack as written (what a user gets)
+  PackSummary pack;                      // of the written file
+};
+
+// Order: options checked; photos read (a bad calibration fails before minutes of
+// preprocessing), then the held-out ones; every output checked against every input; the canvas
+// (preprocessed scans, or an RTI capture's flat canvas); the fit; the provenance (every input
+// file hashed, named relative to the photo set's folder, and every stage's options); the --work
+// folders; the pack; the held-out score from the pack file. Errors name the file or option; the
+// pack is replaced only on success.
+Result<PipelineResult> RunPipeline(const PipelineOptions& options,
+                                   const ProgressCallback& progress = nullptr);
+
+}  // namespace digitize

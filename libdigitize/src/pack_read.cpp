@@ -1,0 +1,581 @@
+// Texture packs: the bounded reader (pack.h: ReadPack, InspectPack), what tests/fuzz/fuzz_pack
+// targets. The raw headers are walked before OpenImageIO opens the file, so a forged header
+// cannot make it allocate what it claims.
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <system_error>
+
+#include "digitize/image_io.h"
+#include "digitize/pack.h"
+#include "exr_attribute_size.h"
+#include "json_fields.h"
+#include "options_json.h"
+#include "pack_exr.h"
+
+namespace digitize {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using namespace pack_exr;
+
+// --- header pre-scan ------------------------------------------------------------------------
+// OpenEXR sizes its line-offset tables and buffers from the data window a header claims. Before
+// OpenImageIO opens the file, walk the raw headers (bounded by the file size and
+// max_header_bytes) and refuse windows beyond max_texels, so a forged header cannot make the
+// reader allocate gigabytes.
+
+struct RawPart {
+  int64_t width = 0, height = 0;
+};
+
+// A part's channel list (OpenEXR "chlist": per channel a NUL-terminated name, int32 pixel type,
+// uint8 pLinear, 3 reserved bytes, int32 x and y sampling; then a NUL). Checked before OpenImageIO
+// sees it: OpenImageIO 2.4 aborts the process on a pixel type other than 0-2 (UINT, HALF, FLOAT),
+// found by tests/fuzz/fuzz_pack. A pack's channels are never subsampled.
+Status CheckChannelList(const std::string& name, size_t part, const char* list, size_t size) {
+  const std::string where = name + ": part " + std::to_string(part) + " channel list";
+  auto i32 = [&](size_t at) {
+    uint32_t u = 0;
+    for (int i = 3; i >= 0; --i) u = (u << 8) | static_cast<uint8_t>(list[at + i]);
+    int32_t v;
+    std::memcpy(&v, &u, 4);
+    return v;
+  };
+  size_t pos = 0;
+  for (;;) {
+    if (pos >= size) return Error{where + " is truncated"};
+    if (list[pos] == '\0') return Status::Ok();  // end of the list
+    const void* nul = std::memchr(list + pos, '\0', std::min<size_t>(size - pos, 256));
+    if (nul == nullptr) return Error{where + " has a name without an end"};
+    const std::string channel(list + pos, static_cast<const char*>(nul) - (list + pos));
+    pos += channel.size() + 1;
+    if (size - pos < 16) return Error{where + " is truncated"};
+    const int32_t pixel_type = i32(pos), x_sampling = i32(pos + 8), y_sampling = i32(pos + 12);
+    if (pixel_type < 0 || pixel_type > 2)
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) +
+                   "\" has unknown pixel type " + std::to_string(pixel_type)};
+    if (x_sampling != 1 || y_sampling != 1)
+      return Error{where + ": channel \"" + EscapeForTerminal(channel.substr(0, 40)) +
+                   "\" is subsampled (" + std::to_string(x_sampling) + ", " +
+                   std::to_string(y_sampling) + "); a digitize pack never is"};
+    pos += 16;
+  }
+}
+
+Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_bytes,
+                                            const PackReadOptions& options) {
+  const std::string name = path.string();
+  const uint64_t want =
+      std::min<uint64_t>(file_bytes, static_cast<uint64_t>(options.max_header_bytes) + 8);
+  std::vector<char> bytes(want);
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return Error{name + ": cannot open"};
+    in.read(bytes.data(), static_cast<std::streamsize>(want));
+    if (static_cast<uint64_t>(in.gcount()) != want) return Error{name + ": read failed"};
+  }
+  size_t pos = 0;
+  auto need = [&](size_t n) { return pos + n <= bytes.size(); };
+  auto read_i32 = [&](int32_t& v) {
+    if (!need(4)) return false;
+    uint32_t u = 0;
+    for (int i = 3; i >= 0; --i) u = (u << 8) | static_cast<uint8_t>(bytes[pos + i]);
+    std::memcpy(&v, &u, 4);
+    pos += 4;
+    return true;
+  };
+  // Attribute and type names: NUL-terminated, at most 31 characters, or 255 with the long-names
+  // flag. OpenEXR reads no further than that limit, so a longer name read here would leave the
+  // two parsers out of step: OpenEXR then takes name bytes for a size field and allocates what
+  // they say (a 3 KB file asked for 2 GB; found by tests/fuzz/fuzz_viewer_load).
+  size_t max_name = 31;
+  auto read_string = [&](std::string& s) {
+    const size_t end = std::min(bytes.size(), pos + max_name + 1);
+    for (size_t i = pos; i < end; ++i) {
+      if (bytes[i] == '\0') {
+        s.assign(bytes.data() + pos, i - pos);
+        pos = i + 1;
+        return true;
+      }
+    }
+    return false;
+  };
+  const std::string truncated = name + ": truncated or corrupt OpenEXR header";
+  int32_t magic = 0, version = 0;
+  if (!read_i32(magic) || magic != 20000630)
+    return Error{name + ": not an OpenEXR file (bad magic number), so not a digitize pack"};
+  if (!read_i32(version)) return Error{truncated};
+  if ((version & 0xff) != 2)
+    return Error{name + ": unsupported OpenEXR version " + std::to_string(version & 0xff)};
+  if ((version & 0x800) != 0) return Error{name + ": deep OpenEXR data, not a digitize pack"};
+  if ((version & 0x400) != 0) max_name = 255;
+  const bool multipart = (version & 0x1000) != 0;
+  if (!multipart)
+    return Error{name + ": a single-part OpenEXR file; a digitize pack has " +
+                 std::to_string(kParts) + " parts (surface, reflectance, boxes)"};
+  std::vector<RawPart> parts;
+  for (;;) {
+    if (!need(1)) {
+      return Error{file_bytes > bytes.size()
+                       ? name + ": OpenEXR headers larger than " +
+                             std::to_string(options.max_header_bytes) + " bytes (limit)"
+                       : truncated};
+    }
+    if (bytes[pos] == '\0') {  // empty header: end of the header list
+      ++pos;
+      break;
+    }
+    if (parts.size() >= kParts)
+      return Error{name + ": more than " + std::to_string(kParts) + " parts; not a digitize pack"};
+    RawPart part;
+    bool has_window = false;
+    for (;;) {
+      if (!need(1)) return Error{truncated};
+      if (bytes[pos] == '\0') {
+        ++pos;
+        break;
+      }
+      std::string attr, type;
+      int32_t size = 0;
+      for (std::string* s : {&attr, &type}) {
+        if (read_string(*s)) continue;
+        if (!need(max_name + 1)) return Error{truncated};
+        return Error{name + ": part " + std::to_string(parts.size()) +
+                     " has an attribute or type name longer than " + std::to_string(max_name) +
+                     " characters, OpenEXR's limit" +
+                     (max_name < 255 ? " without long names" : "")};
+      }
+      if (!read_i32(size) || size < 0 || !need(static_cast<size_t>(size))) return Error{truncated};
+      if (const std::string problem =
+              exr::AttributeSizeProblem(type, bytes.data() + pos, static_cast<size_t>(size));
+          !problem.empty())
+        return Error{name + ": part " + std::to_string(parts.size()) + " attribute '" +
+                     EscapeForTerminal(attr) + "' " + problem + "; corrupt OpenEXR header"};
+      if (attr == "dataWindow") {
+        if (type != "box2i" || size != 16) return Error{name + ": malformed dataWindow attribute"};
+        int32_t box[4] = {0, 0, 0, 0};
+        for (int32_t& b : box) (void)read_i32(b);
+        const int64_t w = int64_t{box[2]} - box[0] + 1, h = int64_t{box[3]} - box[1] + 1;
+        if (w <= 0 || h <= 0)
+          return Error{name + ": part " + std::to_string(parts.size()) +
+                       " has an empty data window"};
+        if (w > options.max_texels || h > options.max_texels || w * h > options.max_texels)
+          return Error{name + ": part " + std::to_string(parts.size()) + " claims " +
+                       std::to_string(w) + "x" + std::to_string(h) + " pixels, more than the " +
+                       std::to_string(options.max_texels) + "-texel limit"};
+        part.width = w;
+        part.height = h;
+        has_window = true;
+      } else if (attr == "channels") {
+        if (type != "chlist") return Error{name + ": malformed channels attribute"};
+        if (Status st =
+                CheckChannelList(name, parts.size(), bytes.data() + pos, static_cast<size_t>(size));
+            !st.ok())
+          return Error{st.message()};
+        pos += static_cast<size_t>(size);
+      } else {
+        pos += static_cast<size_t>(size);
+      }
+    }
+    if (!has_window)
+      return Error{name + ": part " + std::to_string(parts.size()) + " has no dataWindow"};
+    parts.push_back(part);
+  }
+  if (parts.size() != kParts)
+    return Error{name + ": " + std::to_string(parts.size()) + " parts, a digitize pack has " +
+                 std::to_string(kParts) + " (surface, reflectance, boxes)"};
+  return parts;
+}
+
+// --- reading helpers ------------------------------------------------------------------------
+
+Result<double> ParseNumber(const std::string& file, const OIIO::ImageSpec& spec,
+                           const std::string& key) {
+  const std::string text = spec.get_string_attribute(key);
+  if (text.empty()) return Error{file + ": header attribute " + key + " is missing"};
+  double v = 0;
+  const auto r = std::from_chars(text.data(), text.data() + text.size(), v);
+  if (r.ec != std::errc() || r.ptr != text.data() + text.size() || !std::isfinite(v))
+    return Error{file + ": header attribute " + key + " = \"" +
+                 EscapeForTerminal(text.substr(0, 40)) + "\" is not a finite number"};
+  return v;
+}
+
+// Index of each wanted channel in spec.channelnames; error when one is missing or the part has
+// channels we do not know (a pack from a newer writer that did not bump the version).
+Result<std::vector<int>> ChannelIndices(const std::string& file, const OIIO::ImageSpec& spec,
+                                        const char* part, const std::vector<std::string>& wanted) {
+  std::vector<int> index;
+  for (const std::string& w : wanted) {
+    const auto it = std::find(spec.channelnames.begin(), spec.channelnames.end(), w);
+    if (it == spec.channelnames.end())
+      return Error{file + ": part \"" + part + "\" lacks channel " + w};
+    index.push_back(static_cast<int>(it - spec.channelnames.begin()));
+  }
+  if (spec.nchannels != static_cast<int>(wanted.size()))
+    return Error{file + ": part \"" + part + "\" has " + std::to_string(spec.nchannels) +
+                 " channels, expected " + std::to_string(wanted.size())};
+  return index;
+}
+
+Result<RigidTransform> ParseTransform(const std::string& file, const std::string& text) {
+  const std::string where = file + ": digitize:canvas_from_scan";
+  auto parsed = CatchBadInput([&] { return TransformFrom(Fields(ParseJson(text, where), where)); });
+  if (!parsed.ok()) return parsed.error();
+  const RigidTransform t = *parsed;
+  const Mat3d& R = t.rotation;
+  if (!R.allFinite() || !t.translation.allFinite() ||
+      (R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
+    return Error{file + ": digitize:canvas_from_scan rotation is not a rotation"};
+  return t;
+}
+
+// digitize:size_mm ("W x H", mm) must say what pitch x texels says: a reader that shows one and
+// computes with the other would mislead.
+Status CheckSizeMm(const std::string& file, const std::string& text, const PackSummary& s) {
+  double size[2] = {0, 0};
+  const char* p = text.data();
+  const char* end = text.data() + text.size();
+  bool ok = true;
+  for (int i = 0; i < 2 && ok; ++i) {
+    const auto r = std::from_chars(p, end, size[i]);
+    ok = r.ec == std::errc() && std::isfinite(size[i]);
+    p = r.ptr;
+    if (ok && i == 0) {
+      ok = std::string_view(p, end - p).rfind(" x ", 0) == 0;
+      p += 3;
+    }
+  }
+  if (!ok || p != end)
+    return Error{file + ": header attribute digitize:size_mm = \"" +
+                 EscapeForTerminal(text.substr(0, 40)) + "\" is not \"WIDTH x HEIGHT\" in mm"};
+  const double want[2] = {s.width * s.pitch_mm, s.height * s.pitch_mm};
+  for (int i = 0; i < 2; ++i)
+    if (!(std::abs(size[i] - want[i]) <= kPackSizeTolerance * want[i]))
+      return Error{
+          file + ": digitize:size_mm " + FormatNumber(size[0], kRoundTripDigits) + " x " +
+          FormatNumber(size[1], kRoundTripDigits) +
+          " mm disagrees with pitch_mm x texels = " + FormatNumber(want[0], kRoundTripDigits) +
+          " x " + FormatNumber(want[1], kRoundTripDigits) + " mm"};
+  return Status::Ok();
+}
+
+struct Header {
+  PackSummary summary;
+  RigidTransform canvas_from_scan;
+  int cells_x = 0, cells_y = 0;
+};
+
+// Opens the file and checks everything but the pixels.
+Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
+                          std::unique_ptr<OIIO::ImageInput>* keep_open) {
+  const std::string file = path.string();
+  std::error_code ec;
+  const auto st = fs::status(path, ec);
+  if (!fs::exists(st)) return Error{file + ": no such file"};
+  if (!fs::is_regular_file(st)) return Error{file + ": not a regular file"};
+  const uint64_t bytes = fs::file_size(path, ec);
+  if (ec) return Error{file + ": cannot get the file size: " + ec.message()};
+  if (bytes < 8) return Error{file + ": " + std::to_string(bytes) + " bytes, too short for a pack"};
+  auto raw = ScanExrHeaders(path, bytes, options);
+  if (!raw.ok()) return raw.error();
+
+  auto in = OIIO::ImageInput::open(file);
+  if (!in) return Error{file + ": OpenEXR reader refused it: " + OneLine(OIIO::geterror())};
+  OIIO::ImageSpec spec = in->spec();
+  Header h;
+  PackSummary& s = h.summary;
+  s.file_bytes = bytes;
+  const std::string format = spec.get_string_attribute("digitize:format");
+  if (format != kPackFormatName)
+    return Error{file + ": not a digitize pack (header digitize:format is \"" +
+                 EscapeForTerminal(format.substr(0, 40)) + "\", expected \"" + kPackFormatName +
+                 "\")"};
+  auto version = ParseNumber(file, spec, "digitize:version");
+  if (!version.ok()) return version.error();
+  if (*version != std::floor(*version) || *version < 1)
+    return Error{file + ": bad pack version " + FormatNumber(*version)};
+  if (*version > kPackVersion)
+    return Error{file + ": pack version " + FormatNumber(*version) +
+                 " is newer than this reader (" + std::to_string(kPackVersion) +
+                 "); update digitize"};
+  s.version = static_cast<int>(*version);
+  s.width = spec.width;
+  s.height = spec.height;
+  if (spec.width != raw->at(0).width || spec.height != raw->at(0).height)
+    return Error{file + ": part sizes disagree between the raw header and the reader"};
+
+  for (auto [key, target] : {std::pair<const char*, double*>{"digitize:pitch_mm", &s.pitch_mm},
+                             {"digitize:delta0_mm", &s.delta0_mm},
+                             {"digitize:max_height_mm", &s.max_height_mm}}) {
+    auto v = ParseNumber(file, spec, key);
+    if (!v.ok()) return v.error();
+    *target = *v;
+  }
+  auto cell = ParseNumber(file, spec, "digitize:cell_px");
+  if (!cell.ok()) return cell.error();
+  if (*cell != std::floor(*cell) || *cell < 1 || *cell > 65536)
+    return Error{file + ": digitize:cell_px must be an integer in [1, 65536]"};
+  s.cell_px = static_cast<int>(*cell);
+  auto box_count = ParseNumber(file, spec, "digitize:box_count");
+  if (!box_count.ok()) return box_count.error();
+
+  const std::string encoding = spec.get_string_attribute("digitize:encoding");
+  if (encoding == "half") {
+    s.encoding = PackEncoding::kHalf;
+  } else if (encoding == "quantised") {
+    s.encoding = PackEncoding::kQuantised;
+    const std::string q = spec.get_string_attribute("digitize:quantisation");
+    int hb = -1, nb = -1, rb = -1, lb = -1;
+    if (std::sscanf(q.c_str(), "height=%d,normal=%d,rho=%d,lobe=%d", &hb, &nb, &rb, &lb) != 4)
+      return Error{file + ": digitize:quantisation \"" + EscapeForTerminal(q.substr(0, 60)) +
+                   "\" is malformed"};
+    s.quantisation = {hb, nb, rb, lb};
+    if (Status st = s.quantisation.Validate(); !st.ok())
+      return Error{file + ": digitize:quantisation: " + st.message()};
+  } else {
+    return Error{file + ": digitize:encoding \"" + EscapeForTerminal(encoding.substr(0, 40)) +
+                 "\" is neither half nor quantised"};
+  }
+  s.gauge = spec.get_string_attribute("digitize:gauge");
+  if (s.gauge.rfind("lafortune1", 0) != 0)
+    return Error{file + ": digitize:gauge \"" + EscapeForTerminal(s.gauge.substr(0, 40)) +
+                 "\" is not the one-lobe Lafortune gauge this reader knows"};
+  auto prov = ParseProvenance(file, spec.get_string_attribute("digitize:provenance"));
+  if (!prov.ok()) return prov.error();
+  s.provenance = std::move(prov).value();
+  auto transform = ParseTransform(file, spec.get_string_attribute("digitize:canvas_from_scan"));
+  if (!transform.ok()) return transform.error();
+  h.canvas_from_scan = *transform;
+  if (Status st = CheckPhysicalBounds(s.pitch_mm, s.width, s.height, s.delta0_mm, s.max_height_mm,
+                                      h.canvas_from_scan);
+      !st.ok())
+    return Error{file + ": digitize:" + st.message()};
+  if (Status st = CheckSizeMm(file, spec.get_string_attribute("digitize:size_mm"), s); !st.ok())
+    return Error{st.message()};
+
+  h.cells_x = (s.width + s.cell_px - 1) / s.cell_px;
+  h.cells_y = (s.height + s.cell_px - 1) / s.cell_px;
+  if (*box_count != std::floor(*box_count) || *box_count < 0 ||
+      *box_count > double(h.cells_x) * h.cells_y)
+    return Error{file + ": digitize:box_count " + FormatNumber(*box_count, kRoundTripDigits) +
+                 " exceeds the " + std::to_string(h.cells_x) + "x" + std::to_string(h.cells_y) +
+                 " cells"};
+  s.box_count = static_cast<size_t>(*box_count);
+
+  for (int part = 1; part < kParts; ++part) {
+    if (!in->seek_subimage(part, 0))
+      return Error{file + ": part " + std::to_string(part) + " (" + kPartNames[part] +
+                   ") cannot be read: " + OneLine(in->geterror())};
+    const OIIO::ImageSpec& ps = in->spec();
+    const int want_w = part == 2 ? h.cells_x : s.width, want_h = part == 2 ? h.cells_y : s.height;
+    if (ps.width != want_w || ps.height != want_h || ps.width != raw->at(part).width ||
+        ps.height != raw->at(part).height)
+      return Error{file + ": part " + kPartNames[part] + " is " + std::to_string(ps.width) + "x" +
+                   std::to_string(ps.height) + ", expected " + std::to_string(want_w) + "x" +
+                   std::to_string(want_h)};
+  }
+  for (int part = 0; part < 2; ++part) {
+    (void)in->seek_subimage(part, 0);
+    s.raw_bytes_per_texel += static_cast<int>(in->spec().pixel_bytes(/*native=*/true));
+  }
+  if (in->seek_subimage(kParts, 0))
+    return Error{file + ": more than " + std::to_string(kParts) + " parts"};
+  if (!in->seek_subimage(0, 0)) return Error{file + ": cannot return to part 0"};
+  if (keep_open) *keep_open = std::move(in);
+  return h;
+}
+
+// Reads one part's channels as `type` into `out` (nchannels interleaved per pixel).
+template <class T>
+Status ReadPart(const std::string& file, OIIO::ImageInput& in, int part, OIIO::TypeDesc type,
+                std::vector<T>& out) {
+  if (!in.seek_subimage(part, 0))
+    return Error{file + ": cannot seek to part " + std::to_string(part)};
+  const OIIO::ImageSpec& spec = in.spec();
+  out.resize(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
+  if (!in.read_image(part, 0, 0, spec.nchannels, type, out.data()))
+    return Error{file + ": part " + kPartNames[part] + " is corrupt or truncated (" +
+                 OneLine(in.geterror()) + ")"};
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<PackSummary> InspectPack(const fs::path& path, const PackReadOptions& options) {
+  auto header = ReadHeader(path, options, nullptr);
+  if (!header.ok()) return header.error();
+  return header->summary;
+}
+
+Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
+  const std::string file = path.string();
+  std::unique_ptr<OIIO::ImageInput> in;
+  auto header = ReadHeader(path, options, &in);
+  if (!header.ok()) return header.error();
+  const PackSummary& s = header->summary;
+  const int w = s.width, h = s.height;
+  const size_t n = static_cast<size_t>(w) * h;
+
+  std::vector<int> surface_ch, refl_ch, box_ch;
+  OIIO::ImageSpec meta;
+  {
+    if (!in->seek_subimage(0, 0)) return Error{file + ": cannot read part 0"};
+    meta = in->spec();
+    auto c = ChannelIndices(file, in->spec(), kPartNames[0], kSurfaceChannels);
+    if (!c.ok()) return c.error();
+    surface_ch = *c;
+    if (!in->seek_subimage(1, 0)) return Error{file + ": cannot read part 1"};
+    c = ChannelIndices(file, in->spec(), kPartNames[1], kReflectanceChannels);
+    if (!c.ok()) return c.error();
+    refl_ch = *c;
+    if (!in->seek_subimage(2, 0)) return Error{file + ": cannot read part 2"};
+    c = ChannelIndices(file, in->spec(), kPartNames[2], kBoxChannels);
+    if (!c.ok()) return c.error();
+    box_ch = *c;
+  }
+  std::vector<uint16_t> surface, reflectance;
+  std::vector<float> cells;
+  if (Status st = ReadPart(file, *in, 0, OIIO::TypeDesc::HALF, surface); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 1, OIIO::TypeDesc::HALF, reflectance); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok())
+    return Error{st.message()};
+  // Into the writer's channel order (the file's order is EXR's, sorted by name), so the checksum
+  // and everything below index by the canonical layout.
+  auto canonical = [](auto& data, const std::vector<int>& ch) {
+    const size_t nc = ch.size();
+    std::vector<typename std::decay_t<decltype(data)>::value_type> out(data.size());
+    for (size_t i = 0; i < data.size() / nc; ++i)
+      for (size_t k = 0; k < nc; ++k) out[i * nc + k] = data[i * nc + static_cast<size_t>(ch[k])];
+    data.swap(out);
+  };
+  canonical(surface, surface_ch);
+  canonical(reflectance, refl_ch);
+  canonical(cells, box_ch);
+  {
+    const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
+    const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2,
+                                       cells.size() * 4};
+    const std::string stored = meta.get_string_attribute("digitize:checksum");
+    if (stored.empty()) return Error{file + ": header attribute digitize:checksum is missing"};
+    const bool intact = PackChecksum(meta, data, data_bytes) == stored;
+#ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
+    if (!intact)
+      return Error{file + ": checksum mismatch: the file was modified or corrupted after writing"};
+#else
+    // The fuzz build (tests/fuzz/) goes on, so that mutated inputs reach the value checks below.
+    (void)intact;
+#endif
+  }
+
+  Pack pack;
+  pack.field.pitch_mm = s.pitch_mm;
+  pack.field.height_mm = Grid<float>(w, h);
+  pack.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
+  pack.normals = Grid<Vec3f>(w, h);
+  pack.maps = ReflectanceMaps::Zeros(w, h);
+  pack.delta0_mm = s.delta0_mm;
+  pack.max_height_mm = s.max_height_mm;
+  pack.cell_px = s.cell_px;
+  pack.canvas_from_scan = header->canvas_from_scan;
+  pack.provenance = s.provenance;
+  auto bad = [&](size_t i, const std::string& what) {
+    return Error{file + ": texel " + TexelName(int(i % w), int(i / w)) + ": " + what};
+  };
+  for (size_t i = 0; i < n; ++i) {
+    const uint16_t* sp = &surface[4 * i];
+    const uint16_t* rp = &reflectance[9 * i];
+    const float height = FromHalfBits(sp[0]);
+    const float nx = FromHalfBits(sp[1]), ny = FromHalfBits(sp[2]);
+    const float code = FromHalfBits(sp[3]);
+    if (!(std::abs(height) <= kMaxPackHeightMm))
+      return bad(i, "height " + FormatNumber(height) + " mm is not finite or beyond " +
+                        FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm");
+    if (!(std::abs(nx) <= 1.001f && std::abs(ny) <= 1.001f && nx * nx + ny * ny <= 1.002f))
+      return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) +
+                        ") is not a unit normal's x, y");
+    if (!(code >= 0 && code < 4 * kTexelFitStatusCount && code == std::floor(code)))
+      return bad(i, "M = " + FormatNumber(code) + " is not a texel state + 4 x fit status");
+    const int c = static_cast<int>(code);
+    pack.field.height_mm.data[i] = height;
+    pack.field.state.data[i] = static_cast<TexelState>(c % 4);
+    pack.maps.status.data[i] = static_cast<TexelFitStatus>(c / 4);
+    pack.normals.data[i] = NormalFromXY(nx, ny);
+    float v[9];
+    for (int k = 0; k < 9; ++k) {
+      v[k] = FromHalfBits(rp[k]);
+      if (!std::isfinite(v[k])) return bad(i, kReflectanceChannels[k] + " is not finite");
+    }
+    for (int k = 0; k < 6; ++k)
+      if (v[k] < 0) return bad(i, kReflectanceChannels[k] + " is negative");
+    if (v[8] < 0) return bad(i, "lobe.k is negative");
+    pack.maps.rho_d.data[i] = Vec3f(v[0], v[1], v[2]);
+    pack.maps.rho_s.data[i] = Vec3f(v[3], v[4], v[5]);
+    pack.maps.lobe.data[i] = {v[6], v[7], 1.0f, v[8]};
+  }
+  const int cells_x = header->cells_x, cells_y = header->cells_y;
+  for (int cy = 0; cy < cells_y; ++cy)
+    for (int cx = 0; cx < cells_x; ++cx) {
+      const float* c = &cells[4 * (static_cast<size_t>(cy) * cells_x + cx)];
+      const float present = c[0], hmax = c[1], du = c[2], dv = c[3];
+      const std::string cell =
+          file + ": box cell " + std::to_string(cx) + ", " + std::to_string(cy);
+      if (present == 0) continue;
+      if (present != 1) return Error{cell + ": present must be 0 or 1"};
+      ReliefBox b;
+      b.x0 = cx * s.cell_px;
+      b.y0 = cy * s.cell_px;
+      b.width = std::min(s.cell_px, w - b.x0);
+      b.height = std::min(s.cell_px, h - b.y0);
+      if (!(du >= 0 && dv >= 0 && du < b.width && dv < b.height && du == std::floor(du) &&
+            dv == std::floor(dv)))
+        return Error{cell + ": highest texel offset (" + FormatNumber(du) + ", " +
+                     FormatNumber(dv) + ") is not a texel of the cell"};
+      if (!(std::abs(hmax) <= kMaxPackHeightMm))
+        return Error{cell + ": h_max " + FormatNumber(hmax) + " mm is not finite or beyond " +
+                     FormatNumber(kMaxPackHeightMm, kRoundTripDigits) + " mm"};
+      b.h_max_mm = hmax;
+      b.u_max = b.x0 + static_cast<int>(du);
+      b.v_max = b.y0 + static_cast<int>(dv);
+      pack.boxes.push_back(b);
+    }
+  if (pack.boxes.size() != s.box_count)
+    return Error{file + ": " + std::to_string(pack.boxes.size()) + " boxes, the header says " +
+                 std::to_string(s.box_count)};
+  if (Status st = pack.Validate(); !st.ok()) return Error{file + ": " + st.message()};
+  return pack;
+}
+
+std::string PackSummaryJson(const std::string& file, const PackSummary& s) {
+  json j = {{"file", file},
+            {"format", kPackFormatName},
+            {"version", s.version},
+            {"size_texels", {s.width, s.height}},
+            {"pitch_mm", s.pitch_mm},
+            {"size_mm", {s.width * s.pitch_mm, s.height * s.pitch_mm}},
+            {"delta0_mm", s.delta0_mm},
+            {"max_height_mm", s.max_height_mm},
+            {"cell_px", s.cell_px},
+            {"boxes", s.box_count},
+            {"encoding", ToString(s.encoding)},
+            {"file_bytes", s.file_bytes},
+            {"bytes_per_texel", s.BytesPerTexel()},
+            {"raw_bytes_per_texel", s.raw_bytes_per_texel},
+            {"gauge", s.gauge},
+            {"provenance", ProvenanceToJson(s.provenance)}};
+  if (s.encoding == PackEncoding::kQuantised)
+    j["mantissa_bits"] = ToJson(PackWriteOptions{s.encoding, s.quantisation})["mantissa_bits"];
+  return j.dump(2, ' ', /*ensure_ascii=*/true, json::error_handler_t::replace);
+}
+
+}  // namespace digitize

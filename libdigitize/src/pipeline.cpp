@@ -1,0 +1,233 @@
+// The pipeline end to end (pipeline.h): what `digitize fit`, `pack` and `run` call.
+#include "digitize/pipeline.h"
+
+#include <nlohmann/json.hpp>
+
+#include "digitize/output_dir.h"
+#include "digitize/provenance.h"
+#include "digitize/relight.h"
+#include "options_json.h"
+
+namespace digitize {
+
+namespace fs = std::filesystem;
+
+Result<PhotoSet> ReadPhotoSetFile(const fs::path& path, const PhotoSetOptions& options,
+                                  const ProgressCallback& progress) {
+  if (path.extension() == ".lp" || path.extension() == ".LP")
+    return ReadRtiCapture(path, options, progress);
+  return ReadCalibration(path, options, progress);
+}
+
+Result<std::vector<Scan>> ReadScans(const std::vector<std::string>& paths,
+                                    const ScanReadOptions& options) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  std::vector<Scan> exposures;
+  for (const std::string& path : paths) {
+    Result<Scan> scan = ReadScan(path, options);
+    if (!scan.ok()) return scan.error();
+    exposures.push_back(std::move(scan).value());
+  }
+  return exposures;
+}
+
+PreprocessedCanvas CanvasFromPreprocess(const PreprocessResult& result) {
+  PreprocessedCanvas canvas;
+  canvas.field = result.field;
+  canvas.normals = result.normals;
+  canvas.canvas_from_scan = result.canvas.canvas_from_scan;
+  canvas.delta0_mm = result.relief.delta0_mm;
+  canvas.max_height_mm = result.relief.max_height_mm;
+  canvas.cell_px = result.relief.cell_px > 0 ? result.relief.cell_px : 16;
+  canvas.boxes = result.relief.boxes;
+  return canvas;
+}
+
+Result<PreprocessedCanvas> FlatCanvasFor(const PhotoSet& rti) {
+  auto flat = FlatCanvasForRti(rti);
+  if (!flat.ok()) return flat.error();
+  PreprocessedCanvas canvas;
+  canvas.field = std::move(flat).value();
+  canvas.normals = Grid<Vec3f>(canvas.field.width(), canvas.field.height(), Vec3f::UnitZ());
+  return canvas;
+}
+
+Result<PreprocessedCanvas> LoadFitCanvas(const fs::path& canvas_dir, const PhotoSet& set) {
+  if (!canvas_dir.empty()) return ReadPreprocessOutputs(canvas_dir);
+  if (!set.is_rti)
+    return Error{"--canvas is required for a calibration file (" + set.source.string() +
+                 "); only an RTI capture (.lp) can be fitted on a flat canvas without one"};
+  return FlatCanvasFor(set);
+}
+
+ReflectanceFitOptions FitOptionsFor(const PhotoSet& set, ReflectanceFitOptions options,
+                                    bool dark_outlier_ratio_chosen) {
+  if (set.is_rti && !dark_outlier_ratio_chosen) {
+    options.dark_outlier_ratio = 0;
+    options.dark_outlier_fit_ratio = 0;
+  }
+  return options;
+}
+
+Result<PackSummary> PackFromFolders(const fs::path& canvas_dir, const fs::path& fit_dir,
+                                    const fs::path& out, const PackWriteOptions& options) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = CheckOutputPath(out, {canvas_dir, fit_dir}); !s.ok()) return Error{s.message()};
+  auto maps = ReadReflectanceMaps(fit_dir);
+  if (!maps.ok()) return maps.error();
+  if (canvas_dir.empty())
+    return Error{
+        "--canvas is required (for an RTI capture, preprocess a height map or use "
+        "`digitize run --photos capture.lp`)"};
+  auto canvas = ReadPreprocessOutputs(canvas_dir);
+  if (!canvas.ok()) return canvas.error();
+  auto provenance = ProvenanceFromOutputs(canvas_dir, fit_dir, options);
+  if (!provenance.ok()) return provenance.error();
+  auto pack = AssemblePack(std::move(canvas).value(), std::move(maps).value(),
+                           std::move(provenance).value());
+  if (!pack.ok()) return Error{fit_dir.string() + ": " + pack.error().message};
+  if (Status s = WritePack(out, *pack, options); !s.ok()) return Error{s.message()};
+  return InspectPack(out);
+}
+
+Status PipelineOptions::Validate() const {
+  for (const Status& s : {pack.Validate(), photo.Validate(), fit.Validate(), preprocess.Validate()})
+    if (!s.ok()) return s;
+  return Status::Ok();
+}
+
+namespace {
+
+// What `run` records as a pack's provenance: every input file hashed, named relative to the photo
+// set's folder (as its image paths are, not where they lay here), the fit's brief, and every
+// stage's options as it ran (an RTI capture's pitch with where it came from: the pack's physical
+// size rests on it).
+Result<PackProvenance> RunProvenance(const PipelineOptions& options, const PhotoSet& set,
+                                     const ReflectanceFitOptions& fit_options,
+                                     const ReflectanceFitReport& fit) {
+  PackProvenance provenance = NewProvenance();
+  std::vector<fs::path> files(options.scans.begin(), options.scans.end());
+  files.emplace_back(options.photos);
+  for (const Photo& p : set.photos) files.push_back(p.path);
+  if (Status s = AddProvenanceInputs(provenance, files, fs::absolute(options.photos).parent_path());
+      !s.ok())
+    return Error{s.message()};
+  provenance.fit_brief = fit.Brief();
+  nlohmann::json stages = {
+      {"preprocess", options.scans.empty() ? nlohmann::json::object() : ToJson(options.preprocess)},
+      {"fit", ToJson(fit_options)},
+      {"pack", ToJson(options.pack)}};
+  if (set.is_rti)
+    stages["fit"]["rti_pitch"] = {{"mm", set.rti_pitch_mm},
+                                  {"source", set.rti_pitch_source},
+                                  {"assumed", set.rti_pitch_assumed}};
+  provenance.options_json = stages.dump();
+  return provenance;
+}
+
+}  // namespace
+
+Result<PipelineResult> RunPipeline(const PipelineOptions& options,
+                                   const ProgressCallback& progress) {
+  constexpr const char* kCommand = "run";  // recorded in the --work folders' markers
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  PipelineResult result;
+
+  // 1. Photos first: a bad calibration fails before minutes of preprocessing.
+  Result<PhotoSet> set = ReadPhotoSetFile(options.photos, options.photo, progress);
+  if (!set.ok()) return set.error();
+  result.photos = std::move(set).value();
+  const PhotoSet& photos = result.photos;
+  const ReflectanceFitOptions fit_options =
+      FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
+  std::optional<PhotoSet> held;
+  if (!options.held_out.empty()) {
+    Result<PhotoSet> h = ReadPhotoSetFile(options.held_out, options.photo, progress);
+    if (!h.ok()) return h.error();
+    held = std::move(h).value();
+  }
+
+  // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
+  std::vector<fs::path> inputs(options.scans.begin(), options.scans.end());
+  if (!options.read.mask.empty()) inputs.push_back(options.read.mask);
+  inputs.emplace_back(options.photos);
+  for (const Photo& p : photos.photos) inputs.push_back(p.path);
+  if (held) {
+    inputs.emplace_back(options.held_out);
+    for (const Photo& p : held->photos) inputs.push_back(p.path);
+  }
+  const fs::path work(options.work);
+  const FolderOutput work_canvas{kCommand, "canvas", inputs}, work_fit{kCommand, "fit", inputs};
+  std::vector<fs::path> pack_keeps_off = inputs;
+  if (!options.work.empty()) {
+    if (Status s = CheckFolderOutput(work / "canvas", work_canvas); !s.ok())
+      return Error{s.message()};
+    if (Status s = CheckFolderOutput(work / "fit", work_fit); !s.ok()) return Error{s.message()};
+    pack_keeps_off.push_back(work / "canvas");
+    pack_keeps_off.push_back(work / "fit");
+  }
+  if (Status s = CheckOutputPath(options.out, pack_keeps_off); !s.ok()) return Error{s.message()};
+
+  // 2. The canvas: preprocessed scans, or for an RTI capture without a scan its flat image grid.
+  PreprocessedCanvas canvas;
+  if (!options.scans.empty()) {
+    Result<std::vector<Scan>> exposures = ReadScans(options.scans, options.read);
+    if (!exposures.ok()) return exposures.error();
+    Result<PreprocessResult> r =
+        Preprocess(std::move(exposures).value(), options.preprocess, progress);
+    if (!r.ok()) return r.error();
+    result.preprocessed = std::move(r).value();
+    canvas = CanvasFromPreprocess(*result.preprocessed);
+  } else if (photos.is_rti) {
+    auto flat = FlatCanvasFor(photos);
+    if (!flat.ok()) return flat.error();
+    canvas = std::move(flat).value();
+  } else {
+    return Error{"a scan is required with a calibration file (" + options.photos +
+                 "); only an RTI capture (.lp) can be packed on a flat canvas without one"};
+  }
+
+  // 3. Fit.
+  Result<ReflectanceFitResult> fit = FitReflectance(
+      canvas.field, canvas.normals, canvas.canvas_from_scan, photos, fit_options, progress);
+  if (!fit.ok()) return fit.error();
+  result.fit = fit->report;
+
+  // 4. Pack, with provenance.
+  auto provenance = RunProvenance(options, photos, fit_options, fit->report);
+  if (!provenance.ok()) return provenance.error();
+  if (!options.work.empty()) {
+    const std::vector<std::string> photo_inputs = {options.photos};
+    if (result.preprocessed) {
+      Status written =
+          WriteDirectoryAtomically(work / "canvas", work_canvas, [&](const fs::path& dir) {
+            return WritePreprocessOutputs(dir, *result.preprocessed, options.preprocess,
+                                          options.scans);
+          });
+      if (!written.ok()) return Error{written.message()};
+    }
+    Status written = WriteDirectoryAtomically(work / "fit", work_fit, [&](const fs::path& dir) {
+      return WriteReflectanceOutputs(dir, *fit, fit_options, photo_inputs);
+    });
+    if (!written.ok()) return Error{written.message()};
+  }
+  auto pack = AssemblePack(std::move(canvas), fit->maps, std::move(provenance).value());
+  if (!pack.ok()) return pack.error();
+  if (Status s = WritePack(options.out, *pack, options.pack); !s.ok()) return Error{s.message()};
+
+  // 5. Held-out photos relit from the pack as written (what a user of the pack gets).
+  if (held) {
+    auto read = ReadPack(options.out);
+    if (!read.ok()) return read.error();
+    auto score =
+        EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan, *held);
+    if (!score.ok()) return score.error();
+    result.held_out = *score;
+  }
+  auto summary = InspectPack(options.out);
+  if (!summary.ok()) return summary.error();
+  result.pack = *summary;
+  return result;
+}
+
+}  // namespace digitize
