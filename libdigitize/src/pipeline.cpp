@@ -90,6 +90,74 @@ Result<PackSummary> PackFromFolders(const fs::path& canvas_dir, const fs::path& 
   return InspectPack(out);
 }
 
+Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& options,
+                                            const ProgressCallback& progress) {
+  if (Status s = options.preprocess.Validate(); !s.ok()) return Error{s.message()};
+  FolderOutput output{"preprocess", "canvas", {options.scans.begin(), options.scans.end()}};
+  if (!options.read.mask.empty()) output.inputs.emplace_back(options.read.mask);
+  if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
+  Result<std::vector<Scan>> exposures = ReadScans(options.scans, options.read);
+  if (!exposures.ok()) return exposures.error();
+  Result<PreprocessResult> result =
+      Preprocess(std::move(exposures).value(), options.preprocess, progress);
+  if (!result.ok()) return result.error();
+  Status written = WriteDirectoryAtomically(options.out, output, [&](const fs::path& dir) {
+    return WritePreprocessOutputs(dir, *result, options.preprocess, options.scans);
+  });
+  if (!written.ok()) return Error{written.message()};
+  return result;
+}
+
+Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
+                                    const ProgressCallback& progress) {
+  if (Status s = options.photo.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = options.fit.Validate(); !s.ok()) return Error{s.message()};
+  if (!options.canvas.empty())
+    if (Status s = CheckCanvasFolder(options.canvas); !s.ok()) return Error{s.message()};
+
+  FitFolderResult result;
+  Result<PhotoSet> set = ReadPhotoSetFile(options.photos, options.photo, progress);
+  if (!set.ok()) return set.error();
+  result.photos = std::move(set).value();
+  const PhotoSet& photos = result.photos;
+  const ReflectanceFitOptions fit_options =
+      FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
+  std::optional<PhotoSet> held;
+  if (!options.held_out.empty()) {
+    Result<PhotoSet> h = ReadPhotoSetFile(options.held_out, options.photo, progress);
+    if (!h.ok()) return h.error();
+    held = std::move(h).value();
+  }
+  FolderOutput output{"fit", "fit", {options.photos}};
+  if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
+  for (const Photo& p : photos.photos) output.inputs.push_back(p.path);
+  if (held) {
+    output.inputs.emplace_back(options.held_out);
+    for (const Photo& p : held->photos) output.inputs.push_back(p.path);
+  }
+  if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
+
+  Result<PreprocessedCanvas> canvas = LoadFitCanvas(options.canvas, photos);
+  if (!canvas.ok()) return canvas.error();
+  Result<ReflectanceFitResult> fit = FitReflectance(
+      canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
+  if (!fit.ok()) return fit.error();
+  if (held) {
+    auto score = EvaluateHeldOut(canvas->field, canvas->normals, fit->maps,
+                                 canvas->canvas_from_scan, *held);
+    if (!score.ok()) return score.error();
+    result.held_out = *score;
+  }
+  std::vector<std::string> inputs = {options.photos};
+  if (!options.canvas.empty()) inputs.insert(inputs.begin(), options.canvas);
+  Status written = WriteDirectoryAtomically(options.out, output, [&](const fs::path& dir) {
+    return WriteReflectanceOutputs(dir, *fit, fit_options, inputs);
+  });
+  if (!written.ok()) return Error{written.message()};
+  result.fit = std::move(fit->report);
+  return result;
+}
+
 Status PipelineOptions::Validate() const {
   for (const Status& s : {pack.Validate(), photo.Validate(), fit.Validate(), preprocess.Validate()})
     if (!s.ok()) return s;

@@ -3,7 +3,6 @@
 #include <memory>
 
 #include "commands.h"
-#include "digitize/output_dir.h"
 #include "progress_bar.h"
 
 namespace digitize::cli {
@@ -21,23 +20,15 @@ struct PreprocessArgs {
 
 int RunPreprocess(const PreprocessArgs& args) {
   const std::string cmd = "preprocess";
-  if (Status s = args.options.Validate(); !s.ok()) return Fail(cmd, s.message());
-  FolderOutput output{cmd, "canvas", {args.scans.begin(), args.scans.end()}};
-  if (!args.mask.empty()) output.inputs.emplace_back(args.mask);
-  if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
-  Result<std::vector<Scan>> exposures =
-      ReadScans(args.scans, ScanReadOptionsOf(args.read, args.mask, args.grid));
-  if (!exposures.ok()) return Fail(cmd, exposures.error().message);
+  PreprocessFolderOptions o;
+  o.scans = args.scans;
+  o.read = ScanReadOptionsOf(args.read, args.mask, args.grid);
+  o.preprocess = args.options;
+  o.out = args.out;
   ProgressBar bar("preprocess");
-  Result<PreprocessResult> result = Preprocess(std::move(exposures).value(), args.options, bar.Callback());
+  Result<PreprocessResult> result = PreprocessToFolder(o, bar.Callback());
   bar.Finish();
   if (!result.ok()) return Fail(cmd, result.error().message);
-
-  Status written =
-      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
-        return WritePreprocessOutputs(dir, *result, args.options, args.scans);
-      });
-  if (!written.ok()) return Fail(cmd, written.message());
   for (const StepReport& step : result->steps) std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf("total %.3f s; outputs in %s/ (height.exr, normals.exr, mask.png, boxes.json, "
               "transform.json, report.json)\n",

@@ -54,6 +54,44 @@ Result<PackSummary> PackFromFolders(const std::filesystem::path& canvas_dir,
                                     const std::filesystem::path& out,
                                     const PackWriteOptions& options);
 
+// `digitize preprocess`: scan(s) -> a canvas folder.
+struct PreprocessFolderOptions {
+  std::vector<std::string> scans;  // exposures of one pose
+  ScanReadOptions read;            // mask and PLY grid included
+  PreprocessOptions preprocess;
+  std::string out;  // the canvas folder
+};
+
+// Order: options checked; the folder checked against the inputs (scans, mask) before anything is
+// read; the scans read, preprocessed, and written (WritePreprocessOutputs) into `out`, which is
+// replaced only on success. Errors name the file or option.
+Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& options,
+                                            const ProgressCallback& progress = nullptr);
+
+// `digitize fit`: a canvas folder (or an RTI capture alone) + photos -> a fit folder.
+struct FitFolderOptions {
+  std::string canvas;    // a canvas folder; empty: an RTI capture's flat canvas
+  std::string photos;    // calibration JSON or RTI .lp
+  std::string held_out;  // optional: photos not fitted, relit from the fit
+  PhotoSetOptions photo;
+  ReflectanceFitOptions fit;
+  bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
+  std::string out;                         // the fit folder
+};
+
+struct FitFolderResult {
+  PhotoSet photos;
+  ReflectanceFitReport fit;
+  std::optional<HeldOutScore> held_out;
+};
+
+// Order: options checked; an incomplete canvas folder refused before the photos are loaded (a
+// moment, not a minute); photos read, then the held-out ones (a bad file fails before minutes of
+// work); the folder checked against every input; the canvas; the fit; the held-out score; the
+// folder written (WriteReflectanceOutputs), replaced only on success.
+Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
+                                    const ProgressCallback& progress = nullptr);
+
 // `digitize run`: scan(s) + photos -> pack in one go.
 struct PipelineOptions {
   std::vector<std::string> scans;  // none: an RTI capture, packed on its flat canvas
