@@ -1,5 +1,5 @@
 // Per-texel Lafortune fit on synthetic samples with known parameters: recovery, the fast path
-// against ceres::Solve, and the degenerate and hostile cases of issue 3 ("Stress").
+// against ceres::Solve, and the degenerate and hostile cases a per-texel fit meets.
 //
 // The samples come from a dome rig rendered here: V cameras x L point lights (Fibonacci points on
 // the hemisphere), turned by a random azimuth per texel, radiance = f_r (n.l) I + Gaussian noise
@@ -271,7 +271,7 @@ TEST(BrdfFit, FastPathReachesTheReferenceRelightingError) {
                rmse_ceres = std::sqrt(sum_sq[1] / texels);
   std::printf("relighting RMSE over %d texels: fast %.6f, ceres::Solve %.6f\n", texels, rmse_fast,
               rmse_ceres);
-  // "Within a few %" (issue 3): 5 %.
+  // "Within a few %" of the reference: 5 %.
   EXPECT_LT(rmse_fast, 1.05 * rmse_ceres);
   EXPECT_LE(fast_worse, texels / 20);
 }
@@ -461,7 +461,7 @@ TEST(BrdfFit, NonFiniteSamplesAreFilteredOut) {
 TEST(BrdfFit, MeasuredPaintIsApproximated) {
   // Ground truth the one-lobe model cannot match: Lafortune et al.'s 3-lobe fits of measured
   // paints and felt (per-channel lobe shapes, retro-reflection). The fit must stay finite, beat
-  // a diffuse-only fit, and its relighting error is reported (issue 3 asks for the figure).
+  // a diffuse-only fit, and its relighting error is reported (docs/benchmarks.md quotes it).
   const std::filesystem::path path = std::filesystem::path(DIGITIZE_SOURCE_DIR).parent_path() /
                                      "shared" / "data" / "lafortune_measured_fits.txt";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "no " << path;

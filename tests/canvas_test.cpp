@@ -26,7 +26,7 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// Accuracy targets (issue 2, section 4).
+// Accuracy targets (docs/architecture.md, "Stages of preprocess").
 constexpr double kMaxNormalErrorDeg = 0.05;
 constexpr double kMinIoU = 0.995;
 // A frame wall seen obliquely meets the canvas in a sample whose hit on the wall may lie any
@@ -331,7 +331,7 @@ TEST(ExtractCanvas, NoiseFreeFramedScanKeepsNoFramePixel) {
   EXPECT_LT(s.normal_error_deg, 0.01);
   EXPECT_GE(s.iou, 0.998);
   EXPECT_EQ(s.frame_kept, 0u);
-  // The canvas frame: X along the canvas edges (from the outline, issue 10), origin at the
+  // The canvas frame: X along the canvas edges (from the outline rectangle), origin at the
   // visible canvas's corner. The extent is the visible canvas's (the frame hides a strip along
   // two sides: what the canvas-hit samples span in the true frame) within two scan pixels.
   const RigidTransform est_from_truth = r->canvas_from_scan * a.canvas_from_scan.Inverse();

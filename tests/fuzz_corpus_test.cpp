@@ -322,7 +322,7 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   test::WriteFileBytes(dir / "bad_newer_version.exr", newer);
   test::WriteFileBytes(dir / "bad_not_exr.exr", "digitize.pack, but not an OpenEXR file\n");
   // Forged headers with a recomputed checksum (pack_forge.h): physically absurd metadata that
-  // every finiteness check lets through (issue 10: pitch_mm = 1e308 aborted the viewer).
+  // every finiteness check lets through (a forged pitch_mm = 1e308 once aborted the viewer).
   const std::vector<std::pair<std::string, std::map<std::string, std::string>>> forged = {
       {"bad_forged_pitch_1e308.exr", {{"digitize:pitch_mm", "1e308"}}},
       {"bad_forged_pitch_tiny.exr", {{"digitize:pitch_mm", "1e-300"}}},

@@ -1,4 +1,4 @@
-// Output safety (issue 10, section 1): output folders replace only what the tool wrote, no output
+// Output safety (docs/refusals.md, "Output safety"): output folders replace only what the tool wrote, no output
 // lands onto, into or above an input or the current directory, temporaries of killed writers are
 // cleaned, and every writer reports a failed write (full disk, file size limit) with its cause,
 // leaving the previous file.

@@ -1,4 +1,4 @@
-// End-to-end acceptance of "preprocess scanned height maps" (issue 2, section 4), measured against
+// End-to-end acceptance of "preprocess scanned height maps" (docs/architecture.md), measured against
 // the synthetic generator's ground truth, plus the stress cases: each gets a correct result or a
 // clear error, never a crash and never a NaN in an output.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// The fit judged as issue 3 asks: synthetic paintings photographed by the generator (Embree,
+// The fit judged end to end: synthetic paintings photographed by the generator (Embree,
 // relief and frame shadows), fitted on their true canvas, and relit under held-out lights and
 // views against the generator's noise-free renders (frame-shadowed pixels masked, images clipped
 // to white = 1; reflectance_fit.h). Also the parameter errors by paint region, the exactness of

@@ -430,7 +430,7 @@ SynthOutcome RunSynthetic(const synth::PaintingOptions& po, const synth::ScanSim
 TEST(ResampleSynthetic, HeightRmseWithinTwiceTheNoise) {
   // The scan must resolve the painting: features are band-limited to 8 painting texels
   // (3.1 mm at 1024 px over 400 mm) and a 1024^2 scan samples every 0.6 mm, so interpolation
-  // adds far less than the noise. Target (issue 2): RMSE <= 2 sigma.
+  // adds far less than the noise. Target: RMSE <= 2 sigma.
   synth::PaintingOptions po;
   po.resolution_px = 1024;
   synth::ScanSimOptions so;

@@ -333,7 +333,7 @@ TEST(Scene, WithoutFrameTheCanvasEdgeDropsToTheWall) {
   EXPECT_EQ(hits[1].what, Scene::Hit::kCanvas);
 }
 
-// Scans unlike the defaults (issue 10, section 4): per-side widths, bevel, lip, bow.
+// Scans unlike the defaults (docs/refusals.md, "Scans"): per-side widths, bevel, lip, bow.
 
 TEST(FrameOptions, NewShapeOptionsValidateAndNameTheOption) {
   FrameOptions f;

@@ -1,4 +1,4 @@
-// Packs are shared between institutions, so a pack is untrusted input (issue 10, section 2):
+// Packs are shared between institutions, so a pack is untrusted input (docs/refusals.md, "Packs and shared files"):
 // what `digitize inspect` / `verify` and `digitize-viewer` do with hostile packs -- provenance
 // that holds terminal escapes and forged lines, a forged header with a recomputed checksum, a
 // pack the viewer cannot hang -- and with screenshot sizes no GL can render. The library-level

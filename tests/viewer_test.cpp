@@ -1,4 +1,4 @@
-// Viewer (issue 5): headless renders of a synthetic painting against the Embree reference
+// Viewer (seed 001, section 5): headless renders of a synthetic painting against the Embree reference
 // (RenderRelit on the full height field, same camera, light and shading), per technique and per
 // paper view; relief vs bump at grazing impasto; a flat-height lookup; no popping along a slow
 // path across the adaptive thresholds; packs that fail to load.
@@ -592,7 +592,7 @@ TEST(ViewerTest, RefusedPackIsListedAndTheOthersHang) {
   EXPECT_LT(scene.gallery.width_mm, 1e4);  // one 160 mm painting: the minimum room
 }
 
-// The pack file of issue 10 (pitch_mm = 1e308 with a recomputed checksum) is refused at load,
+// The forged pack file (pitch_mm = 1e308 with a recomputed checksum) is refused at load,
 // naming the file and the attribute; the viewer then hangs the good pack beside it.
 TEST(ViewerTest, ForgedPackFailsToLoadAndTheGoodOneRenders) {
   REQUIRE_GL();

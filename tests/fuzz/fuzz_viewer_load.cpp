@@ -1,7 +1,7 @@
 // libFuzzer target: the viewer's load path without GL (viewer_contract.h): a pack file through
 // LoadPackForViewer (ReadPack), PreparePainting (what Renderer::AddPainting checks and derives
 // before uploading) and the gallery's set-up (HangPaintings, MakeGallery). The aim: no pack a
-// reader accepts can abort the viewer (issue 10: pitch_mm = 1e308 did, in Renderer::Render).
+// reader accepts can abort the viewer (a forged pitch_mm = 1e308 did, in Renderer::Render).
 // Seed corpus: corpus/fuzz_viewer_load/ (tests/fuzz_corpus_test.cpp, DISABLED_WritePackSeeds,
 // writes it). Each input is written to a scratch file first, as in fuzz_pack.
 #include <OpenImageIO/imageio.h>
