@@ -1,6 +1,6 @@
-// Per-texel Lafortune fit benchmark (docs/benchmarks.md, "BRDF fit core"): fit time per texel of the ceres::Solve
-// reference path against the fast variable-projection path, on the same synthetic texels, with
-// the relighting error of each side by side. Written as CSV (docs/bench_brdf_fit.csv).
+// Per-texel Lafortune fit benchmark (docs/benchmarks.md, "BRDF fit core"): fit time per texel of
+// the ceres::Solve reference path against the fast variable-projection path, on the same synthetic
+// texels, with the relighting error of each side by side. Written as CSV (docs/bench_brdf_fit.csv).
 //
 // Texels: a dome rig of 4 cameras (50 deg elevation) x 16 point lights (Fibonacci dome above
 // 15 deg) = 64 samples per texel, turned by a random azimuth per texel; ground truth per texel

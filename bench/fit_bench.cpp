@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
+#include "bench_support.h"
 #include "digitize/photo_set.h"
 #include "digitize/reflectance_fit.h"
-#include "bench_support.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
 #include "digitize_synth/scan_sim.h"
@@ -35,7 +35,8 @@ using bench::Since;
 struct Row {
   std::string config;
   size_t texels = 0, photos = 0, samples_kept = 0, rays = 0, rays_skipped = 0, rays_traced = 0;
-  double seconds_load = 0, seconds_samples = 0, seconds_fit = 0, seconds_write = 0, seconds_total = 0;
+  double seconds_load = 0, seconds_samples = 0, seconds_fit = 0, seconds_write = 0,
+         seconds_total = 0;
   double us_per_texel_fit = 0, psnr_db = 0, rmse = 0;
   std::string brief;
 };
@@ -54,7 +55,8 @@ Row Describe(const std::string& config, const ReflectanceFitResult& r, size_t ph
   row.seconds_samples = r.report.seconds_samples;
   row.seconds_fit = r.report.seconds_fit;
   row.seconds_total = r.report.seconds_total;
-  row.us_per_texel_fit = 1e6 * r.report.seconds_fit / static_cast<double>(std::max<size_t>(1, row.texels));
+  row.us_per_texel_fit =
+      1e6 * r.report.seconds_fit / static_cast<double>(std::max<size_t>(1, row.texels));
   row.psnr_db = score.psnr_db;
   row.rmse = score.rmse;
   row.brief = r.report.Brief();
@@ -82,7 +84,8 @@ Crop MakeCrop(const HeightField& f, const Grid<Vec3f>& normals, const RigidTrans
       c.normals(x, y) = normals(x0 + x, y0 + y);
     }
   // Crop frame = canvas frame shifted by the crop's lower-left corner.
-  const Eigen::Vector2d corner = f.TexelCentreMm(x0, y0 + n - 1) - Eigen::Vector2d::Constant(0.5 * f.pitch_mm);
+  const Eigen::Vector2d corner =
+      f.TexelCentreMm(x0, y0 + n - 1) - Eigen::Vector2d::Constant(0.5 * f.pitch_mm);
   RigidTransform shift;
   shift.translation = {-corner.x(), -corner.y(), 0.0};
   c.canvas_from_scan = shift * cfs;
@@ -107,9 +110,9 @@ int main(int argc, char** argv) {
   const double seconds_render = photographed.seconds_render;
   const size_t texels = painting.truth.height_mm.size();
   std::printf("painting %dx%d = %.2f M texels, %zu photos %dx%d (%s), rendered in %.1f s\n",
-              painting.truth.width(), painting.truth.height(), texels / 1e6, truth.fit.photos.size(),
-              truth.fit.photos[0].camera.width, truth.fit.photos[0].camera.height,
-              synth::ToString(so.encoding), seconds_render);
+              painting.truth.width(), painting.truth.height(), texels / 1e6,
+              truth.fit.photos.size(), truth.fit.photos[0].camera.width,
+              truth.fit.photos[0].camera.height, synth::ToString(so.encoding), seconds_render);
 
   // The photos as a user has them: files on disk, decoded by the fit.
   const std::filesystem::path dir =
@@ -139,7 +142,8 @@ int main(int argc, char** argv) {
   t0 = Clock::now();
   (void)WriteReflectanceOutputs(dir / "fit", *fast, options, {"bench"});
   const double seconds_write = Since(t0);
-  auto score = EvaluateHeldOut(canvas, normals, fast->maps, {}, truth.held_out, truth.held_out_mask);
+  auto score =
+      EvaluateHeldOut(canvas, normals, fast->maps, {}, truth.held_out, truth.held_out_mask);
   Row whole = Describe("whole fit: fast, skip", *fast, set->photos.size(), *score);
   whole.seconds_load = seconds_load;
   whole.seconds_write = seconds_write;
@@ -150,23 +154,24 @@ int main(int argc, char** argv) {
   ReflectanceFitOptions no_skip = options;
   no_skip.samples.trace.skip_unblockable = false;
   auto traced = FitReflectance(canvas, normals, {}, *set, no_skip);
-  rows.push_back(Describe("fast, no skip", *traced, set->photos.size(),
-                          *EvaluateHeldOut(canvas, normals, traced->maps, {}, truth.held_out,
-                                           truth.held_out_mask)));
+  rows.push_back(Describe(
+      "fast, no skip", *traced, set->photos.size(),
+      *EvaluateHeldOut(canvas, normals, traced->maps, {}, truth.held_out, truth.held_out_mask)));
   // 3. No shadow or visibility rays at all: what the rays buy in accuracy.
   ReflectanceFitOptions no_rays = options;
   no_rays.samples.shadow_rays = no_rays.samples.visibility_rays = false;
   auto blind = FitReflectance(canvas, normals, {}, *set, no_rays);
-  rows.push_back(Describe("fast, no rays", *blind, set->photos.size(),
-                          *EvaluateHeldOut(canvas, normals, blind->maps, {}, truth.held_out,
-                                           truth.held_out_mask)));
+  rows.push_back(Describe(
+      "fast, no rays", *blind, set->photos.size(),
+      *EvaluateHeldOut(canvas, normals, blind->maps, {}, truth.held_out, truth.held_out_mask)));
 
   // 4. Fast vs ceres::Solve on a crop (held-out PSNR on the crop's pixels).
   const int n = std::min({crop_n, canvas.width(), canvas.height()});
   const Crop crop = MakeCrop(canvas, normals, RigidTransform{}, (canvas.width() - n) / 2,
                              (canvas.height() - n) / 2, n);
-  for (const auto& [name, method] : {std::pair{"crop: fast", BrdfFitMethod::kFast},
-                                     std::pair{"crop: ceres::Solve", BrdfFitMethod::kCeresReference}}) {
+  for (const auto& [name, method] :
+       {std::pair{"crop: fast", BrdfFitMethod::kFast},
+        std::pair{"crop: ceres::Solve", BrdfFitMethod::kCeresReference}}) {
     ReflectanceFitOptions o = options;
     o.fit.method = method;
     auto r = FitReflectance(crop.field, crop.normals, crop.canvas_from_scan, *set, o);
@@ -184,10 +189,11 @@ int main(int argc, char** argv) {
                 r.rays ? 100.0 * r.rays_skipped / r.rays : 0.0, r.psnr_db, r.rmse);
   const Row& f = rows[3];
   const Row& c = rows[4];
-  std::printf("\nfast vs ceres::Solve on the crop: %.1fx faster per texel (%.2f vs %.2f us), PSNR "
-              "%.2f vs %.2f dB\n",
-              c.us_per_texel_fit / f.us_per_texel_fit, f.us_per_texel_fit, c.us_per_texel_fit,
-              f.psnr_db, c.psnr_db);
+  std::printf(
+      "\nfast vs ceres::Solve on the crop: %.1fx faster per texel (%.2f vs %.2f us), PSNR "
+      "%.2f vs %.2f dB\n",
+      c.us_per_texel_fit / f.us_per_texel_fit, f.us_per_texel_fit, c.us_per_texel_fit, f.psnr_db,
+      c.psnr_db);
   std::printf("ray skipping: samples %.2f s vs %.2f s without (%.1fx)\n", rows[0].seconds_samples,
               rows[1].seconds_samples, rows[1].seconds_samples / rows[0].seconds_samples);
   std::printf("whole fit: %s\n", rows[0].brief.c_str());
@@ -195,7 +201,8 @@ int main(int argc, char** argv) {
   if (!csv_dir.empty()) {
     std::ofstream csv(csv_dir / csv_name);
     csv << "config,texels,photos,samples_kept,rays,rays_skipped,rays_traced,seconds_load,"
-           "seconds_samples,seconds_fit,seconds_write,seconds_total,us_per_texel_fit,psnr_db,rmse\n";
+           "seconds_samples,seconds_fit,seconds_write,seconds_total,us_per_texel_fit,psnr_db,"
+           "rmse\n";
     for (const Row& r : rows)
       csv << '"' << r.config << "\"," << r.texels << "," << r.photos << "," << r.samples_kept << ","
           << r.rays << "," << r.rays_skipped << "," << r.rays_traced << "," << r.seconds_load << ","

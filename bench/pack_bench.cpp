@@ -1,9 +1,9 @@
-// Pack size against relighting error (docs/benchmarks.md, "Texture packs"): a synthetic painting photographed under 64 point
-// lights and fitted on its true canvas, then packed in half mode and in quantised modes of fewer
-// and fewer mantissa bits. For each: the file's bytes per texel (after ZIP), the write and read
-// times, and the held-out relighting PSNR computed from the pack READ BACK (height, normals and
-// maps as stored) against the noise-free truth renders, next to the PSNR of the in-memory float
-// maps. Writes docs/bench_pack.csv for bench/plot_pack.gp.
+// Pack size against relighting error (docs/benchmarks.md, "Texture packs"): a synthetic painting
+// photographed under 64 point lights and fitted on its true canvas, then packed in half mode and in
+// quantised modes of fewer and fewer mantissa bits. For each: the file's bytes per texel (after
+// ZIP), the write and read times, and the held-out relighting PSNR computed from the pack READ BACK
+// (height, normals and maps as stored) against the noise-free truth renders, next to the PSNR of
+// the in-memory float maps. Writes docs/bench_pack.csv for bench/plot_pack.gp.
 //
 //   pack_bench [--long-side=820] [--lights=64] [--pixels-per-texel=2.07] [--csv-dir=docs]
 #include <cctype>
@@ -14,10 +14,10 @@
 #include <string>
 #include <vector>
 
+#include "bench_support.h"
 #include "digitize/pack.h"
 #include "digitize/reflectance_fit.h"
 #include "digitize/relief.h"
-#include "bench_support.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
 
@@ -55,7 +55,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "%s\n", fit.error().message.c_str());
     return 1;
   }
-  auto base = EvaluateHeldOut(canvas, painting.normals, fit->maps, {}, truth.held_out, truth.held_out_mask);
+  auto base =
+      EvaluateHeldOut(canvas, painting.normals, fit->maps, {}, truth.held_out, truth.held_out_mask);
   std::printf("painting %dx%d = %.2f M texels, %zu photos (%s, noise %.4f); fit: %s\n",
               canvas.width(), canvas.height(), texels / 1e6, truth.fit.photos.size(),
               synth::ToString(so.encoding), so.noise_sigma, fit->report.Brief().c_str());
@@ -110,7 +111,8 @@ int main(int argc, char** argv) {
     Row r;
     r.config = c.name;
     // One group quantised alone shows which group costs the PSNR; the others sweep all at once.
-    r.series = std::string(c.name).find("q ") == 0 && !std::isdigit(static_cast<unsigned char>(c.name[2])) &&
+    r.series = std::string(c.name).find("q ") == 0 &&
+                       !std::isdigit(static_cast<unsigned char>(c.name[2])) &&
                        std::string(c.name) != "q default"
                    ? "one group"
                    : "sweep";
@@ -128,25 +130,29 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "%s\n", read.error().message.c_str());
       return 1;
     }
-    r.bytes_per_texel = static_cast<double>(std::filesystem::file_size(path)) / static_cast<double>(texels);
+    r.bytes_per_texel =
+        static_cast<double>(std::filesystem::file_size(path)) / static_cast<double>(texels);
     auto score = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan,
                                  truth.held_out, truth.held_out_mask);
     r.psnr_db = score->psnr_db;
     r.loss_db = base->psnr_db - score->psnr_db;
     rows.push_back(r);
-    std::printf("%-12s %6.2f bytes/texel  write %5.2f s  read %5.2f s  PSNR %6.2f dB  loss %5.2f dB\n",
-                r.config.c_str(), r.bytes_per_texel, r.write_s, r.read_s, r.psnr_db, r.loss_db);
+    std::printf(
+        "%-12s %6.2f bytes/texel  write %5.2f s  read %5.2f s  PSNR %6.2f dB  loss %5.2f dB\n",
+        r.config.c_str(), r.bytes_per_texel, r.write_s, r.read_s, r.psnr_db, r.loss_db);
     std::fflush(stdout);
   }
   std::filesystem::remove_all(dir);
   if (!csv_dir.empty()) {
     std::ofstream csv(csv_dir / "bench_pack.csv");
-    csv << "config,series,height_bits,normal_bits,rho_bits,lobe_bits,bytes_per_texel,write_s,read_s,"
+    csv << "config,series,height_bits,normal_bits,rho_bits,lobe_bits,bytes_per_texel,write_s,read_"
+           "s,"
            "psnr_db,loss_db,float_psnr_db,texels\n";
     for (const Row& r : rows)
-      csv << r.config << "," << r.series << "," << r.height_bits << "," << r.normal_bits << "," << r.rho_bits << ","
-          << r.lobe_bits << "," << r.bytes_per_texel << "," << r.write_s << "," << r.read_s << ","
-          << r.psnr_db << "," << r.loss_db << "," << base->psnr_db << "," << texels << "\n";
+      csv << r.config << "," << r.series << "," << r.height_bits << "," << r.normal_bits << ","
+          << r.rho_bits << "," << r.lobe_bits << "," << r.bytes_per_texel << "," << r.write_s << ","
+          << r.read_s << "," << r.psnr_db << "," << r.loss_db << "," << base->psnr_db << ","
+          << texels << "\n";
     std::printf("wrote %s\n", (csv_dir / "bench_pack.csv").string().c_str());
   }
   return 0;

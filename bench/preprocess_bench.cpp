@@ -59,7 +59,8 @@ struct Row {
 };
 std::vector<Row> g_size_rows, g_noise_rows;
 
-const std::vector<std::string> kSteps = {"merge", "sanitize", "canvas", "resample", "relief", "normals"};
+const std::vector<std::string> kSteps = {"merge",    "sanitize", "canvas",
+                                         "resample", "relief",   "normals"};
 
 void RecordSteps(const PreprocessResult& r, Row& row, int iterations) {
   for (const StepReport& s : r.steps) row.step_seconds[s.name] += s.seconds / iterations;
@@ -97,10 +98,12 @@ void BM_PreprocessSize(benchmark::State& state) {
   row.accuracy = synth::MeasureAccuracy(last, c->painting, c->scan);
 
   // I/O is reported apart from compute: write and read the scan as a float EXR.
-  const auto path = std::filesystem::temp_directory_path() / ("digitize_bench_" + std::to_string(px) + ".exr");
+  const auto path =
+      std::filesystem::temp_directory_path() / ("digitize_bench_" + std::to_string(px) + ".exr");
   auto t0 = std::chrono::steady_clock::now();
   if (WriteScanExr(path, c->scan.exposures.front()).ok()) {
-    row.write_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    row.write_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     t0 = std::chrono::steady_clock::now();
     Result<Scan> back = ReadScan(path, ScanReadOptions{});
     row.read_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -146,8 +149,8 @@ void WriteCsv(const std::filesystem::path& path, const std::vector<Row>& rows) {
     out << "," << r.total_seconds << "," << r.read_seconds << "," << r.write_seconds << ","
         << a.normal_error_deg << "," << a.mask_iou << "," << a.frame_pixels_kept << ","
         << a.height_rmse_mm << "," << a.height_offset_mm << "," << a.normals_median_deg << ","
-        << a.normals_p90_deg << "," << a.relief_texels_true << "," << a.relief_texels_uncovered << ","
-        << a.frame_pixels_max_height_mm << "\n";
+        << a.normals_p90_deg << "," << a.relief_texels_true << "," << a.relief_texels_uncovered
+        << "," << a.frame_pixels_max_height_mm << "\n";
   }
   std::ofstream(path) << out.str();
   std::printf("wrote %s\n", path.c_str());
@@ -169,16 +172,25 @@ int main(int argc, char** argv) {
   std::vector<char*> rest;
   for (int i = 0; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (arg.rfind("--sizes=", 0) == 0) sizes = ParseSizes(arg.substr(8));
-    else if (arg.rfind("--csv-dir=", 0) == 0) csv_dir = arg.substr(10);
-    else rest.push_back(argv[i]);
+    if (arg.rfind("--sizes=", 0) == 0)
+      sizes = ParseSizes(arg.substr(8));
+    else if (arg.rfind("--csv-dir=", 0) == 0)
+      csv_dir = arg.substr(10);
+    else
+      rest.push_back(argv[i]);
   }
   for (int px : sizes)
     benchmark::RegisterBenchmark("preprocess/size", BM_PreprocessSize)
-        ->Arg(px)->Unit(benchmark::kMillisecond)->Iterations(3)->UseRealTime();
+        ->Arg(px)
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(3)
+        ->UseRealTime();
   for (int noise_um : {0, 5, 10, 20, 50, 100, 200})
     benchmark::RegisterBenchmark("preprocess/noise_um", BM_PreprocessNoise)
-        ->Arg(noise_um)->Unit(benchmark::kMillisecond)->Iterations(1)->UseRealTime();
+        ->Arg(noise_um)
+        ->Unit(benchmark::kMillisecond)
+        ->Iterations(1)
+        ->UseRealTime();
   int rest_argc = static_cast<int>(rest.size());
   benchmark::Initialize(&rest_argc, rest.data());
   benchmark::RunSpecifiedBenchmarks();

@@ -56,7 +56,8 @@ class CliTest : public digitize::test::ScratchDirTest {
 TEST_F(CliTest, HelpForEveryCommand) {
   Output top = RunCli("--help");
   EXPECT_EQ(top.exit_code, 0);
-  for (const char* cmd : {"synth", "preprocess", "fit", "pack", "run", "inspect", "verify", "demo"}) {
+  for (const char* cmd :
+       {"synth", "preprocess", "fit", "pack", "run", "inspect", "verify", "demo"}) {
     EXPECT_NE(top.text.find(cmd), std::string::npos) << cmd;
     Output sub = RunCli(std::string(cmd) + " --help");
     EXPECT_EQ(sub.exit_code, 0) << cmd;
@@ -91,23 +92,27 @@ TEST_F(CliTest, CorruptScanNamesTheFileAndWritesNothing) {
 TEST_F(CliTest, BadOptionValueNamesTheOption) {
   Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96");
   ASSERT_EQ(synth.exit_code, 0) << synth.text;
-  Output out = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") + " --cell-px 0");
+  Output out =
+      RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") + " --cell-px 0");
   EXPECT_EQ(out.exit_code, 1) << out.text;
   EXPECT_NE(out.text.find("cell_px"), std::string::npos) << out.text;
   EXPECT_FALSE(fs::exists(Path("out")));
 }
 
 TEST_F(CliTest, SynthThenPreprocessWritesCompleteOutputs) {
-  Output synth = RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 256 --seed 3");
+  Output synth =
+      RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 256 --seed 3");
   ASSERT_EQ(synth.exit_code, 0) << synth.text;
-  for (const char* f : {"scan.exr", "truth_height.exr", "truth_normals.exr", "truth.json", "truth_mask_scan.png"})
+  for (const char* f :
+       {"scan.exr", "truth_height.exr", "truth_normals.exr", "truth.json", "truth_mask_scan.png"})
     EXPECT_TRUE(fs::exists(Path(std::string("s/") + f))) << f;
 
   Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c"));
   ASSERT_EQ(pre.exit_code, 0) << pre.text;
   for (const char* step : {"sanitize", "canvas", "resample", "relief", "normals"})
     EXPECT_NE(pre.text.find(step), std::string::npos) << "one line per step: " << step;
-  for (const char* f : {"height.exr", "normals.exr", "mask.png", "boxes.json", "transform.json", "report.json"})
+  for (const char* f :
+       {"height.exr", "normals.exr", "mask.png", "boxes.json", "transform.json", "report.json"})
     EXPECT_TRUE(fs::exists(Path(std::string("c/") + f))) << f;
 
   // The height map is a finite float image with the pitch in its header.
@@ -195,7 +200,8 @@ TEST_F(CliTest, PackRunInspectVerify) {
                       " --out " + Path("f"));
   ASSERT_EQ(fit.exit_code, 0) << fit.text;
 
-  Output pack = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("p.pack.exr"));
+  Output pack =
+      RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + Path("p.pack.exr"));
   ASSERT_EQ(pack.exit_code, 0) << pack.text;
   EXPECT_NE(pack.text.find("bytes/texel"), std::string::npos) << pack.text;
   Output q = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
@@ -271,9 +277,11 @@ TEST_F(CliTest, PackRunInspectVerify) {
   EXPECT_EQ(RunCli("inspect " + Path("nothing.pack.exr")).exit_code, 1);
 
   // A fit folder from another canvas: refused, nothing written.
-  ASSERT_EQ(RunCli("synth --out " + Path("s2") + " --resolution 96 --scan-size 120 120").exit_code, 0);
+  ASSERT_EQ(RunCli("synth --out " + Path("s2") + " --resolution 96 --scan-size 120 120").exit_code,
+            0);
   ASSERT_EQ(RunCli("preprocess " + Path("s2/scan.exr") + " --out " + Path("c2")).exit_code, 0);
-  Output mismatch = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " + Path("m.pack.exr"));
+  Output mismatch = RunCli("pack --canvas " + Path("c2") + " --fit " + Path("f") + " --out " +
+                           Path("m.pack.exr"));
   EXPECT_EQ(mismatch.exit_code, 1);
   EXPECT_NE(mismatch.text.find("another canvas"), std::string::npos) << mismatch.text;
   EXPECT_FALSE(fs::exists(Path("m.pack.exr")));
@@ -285,9 +293,10 @@ TEST_F(CliTest, PackRunInspectVerify) {
     const auto old_size = fs::file_size(target);
     int old_seen = 0, new_seen = 0;
     for (int delay_ms : {0, 20, 40, 80, 120, 160, 240, 320, 480, 640}) {
-      const std::string cmd = std::string(DIGITIZE_CLI) + " pack --canvas " + Path("c") + " --fit " +
-                              Path("f") + " --out " + target + " > /dev/null 2>&1 & pid=$!; sleep " +
-                              std::to_string(delay_ms / 1000.0) + "; kill -9 $pid 2>/dev/null; wait $pid";
+      const std::string cmd =
+          std::string(DIGITIZE_CLI) + " pack --canvas " + Path("c") + " --fit " + Path("f") +
+          " --out " + target + " > /dev/null 2>&1 & pid=$!; sleep " +
+          std::to_string(delay_ms / 1000.0) + "; kill -9 $pid 2>/dev/null; wait $pid";
       (void)std::system(cmd.c_str());
       ASSERT_TRUE(fs::exists(target)) << "after a kill at " << delay_ms << " ms";
       Output v = RunCli("verify " + target);
@@ -297,9 +306,12 @@ TEST_F(CliTest, PackRunInspectVerify) {
     }
     std::printf("killed pack writes: %d left the old pack, %d finished\n", old_seen, new_seen);
     // The next complete write clears the temporaries the killed writers left.
-    ASSERT_EQ(RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + target).exit_code, 0);
+    ASSERT_EQ(
+        RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " + target).exit_code,
+        0);
     for (const auto& e : fs::directory_iterator(dir_))
-      EXPECT_EQ(e.path().filename().string().find(".k.pack.exr.tmp-"), std::string::npos) << e.path();
+      EXPECT_EQ(e.path().filename().string().find(".k.pack.exr.tmp-"), std::string::npos)
+          << e.path();
   }
 
   // A write that fails part way (file size limit; a full disk where a small tmpfs can be
@@ -355,13 +367,13 @@ TEST_F(CliTest, FitFromFilesAndItsErrors) {
   Output pre = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c"));
   ASSERT_EQ(pre.exit_code, 0) << pre.text;
   const std::string base = "fit --canvas " + Path("c") + " --photos ";
-  Output fit = RunCli(base + Path("s/photos/calib.json") + " --out " + Path("f") +
-                      " --held-out " + Path("s/photos/held_out/calib.json"));
+  Output fit = RunCli(base + Path("s/photos/calib.json") + " --out " + Path("f") + " --held-out " +
+                      Path("s/photos/held_out/calib.json"));
   ASSERT_EQ(fit.exit_code, 0) << fit.text;
   for (const char* what : {"samples:", "held-out PSNR", "converged", "outputs in"})
     EXPECT_NE(fit.text.find(what), std::string::npos) << what << "\n" << fit.text;
-  for (const char* f : {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr", "fit_status.png",
-                        "report.json"})
+  for (const char* f :
+       {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr", "fit_status.png", "report.json"})
     EXPECT_TRUE(fs::exists(Path(std::string("f/") + f))) << f;
   {  // lobe.exr: 4 float channels named cx, cy, cz, k, all finite
     auto in = OIIO::ImageInput::open(Path("f/lobe.exr"));

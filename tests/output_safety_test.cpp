@@ -1,7 +1,7 @@
-// Output safety (docs/refusals.md, "Output safety"): output folders replace only what the tool wrote, no output
-// lands onto, into or above an input or the current directory, temporaries of killed writers are
-// cleaned, and every writer reports a failed write (full disk, file size limit) with its cause,
-// leaving the previous file.
+// Output safety (docs/refusals.md, "Output safety"): output folders replace only what the tool
+// wrote, no output lands onto, into or above an input or the current directory, temporaries of
+// killed writers are cleaned, and every writer reports a failed write (full disk, file size limit)
+// with its cause, leaving the previous file.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>

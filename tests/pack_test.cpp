@@ -28,10 +28,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-#define ASSERT_OK(status_expr)                       \
-  do {                                               \
-    const Status status_ = (status_expr);            \
-    ASSERT_TRUE(status_.ok()) << status_.message();  \
+#define ASSERT_OK(status_expr)                      \
+  do {                                              \
+    const Status status_ = (status_expr);           \
+    ASSERT_TRUE(status_.ok()) << status_.message(); \
   } while (0)
 
 fs::path TempDir(const std::string& name) {
@@ -93,7 +93,8 @@ Pack MakeTestPack(int w, int h, uint32_t seed, bool with_relief = true) {
       p.maps.status(x, y) = static_cast<TexelFitStatus>(rng() % kTexelFitStatusCount);
       p.maps.fit_error(x, y) = 0.01f * u01(rng);
     }
-  p.canvas_from_scan.rotation = Eigen::AngleAxisd(0.3, Vec3d(0.2, 0.5, 1).normalized()).toRotationMatrix();
+  p.canvas_from_scan.rotation =
+      Eigen::AngleAxisd(0.3, Vec3d(0.2, 0.5, 1).normalized()).toRotationMatrix();
   p.canvas_from_scan.translation = Vec3d(-12.5, 3.25, 100.0);
   p.provenance.tool_version = "digitize test";
   p.provenance.created_utc = "2026-11-30T00:00:00Z";
@@ -312,8 +313,8 @@ TEST(Pack, TruncatedPacksAreRefused) {
   ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(32, 24, 9)));
   const auto bytes = ReadBytes(dir / "p.pack.exr");
   const fs::path cut = dir / "cut.pack.exr";
-  for (size_t len : {size_t{0}, size_t{4}, size_t{8}, size_t{100}, bytes.size() / 4, bytes.size() / 2,
-                     bytes.size() - 100, bytes.size() - 1}) {
+  for (size_t len : {size_t{0}, size_t{4}, size_t{8}, size_t{100}, bytes.size() / 4,
+                     bytes.size() / 2, bytes.size() - 100, bytes.size() - 1}) {
     WriteBytes(cut, std::vector<char>(bytes.begin(), bytes.begin() + static_cast<long>(len)));
     auto r = ReadPack(cut);
     ASSERT_FALSE(r.ok()) << "length " << len;
@@ -388,8 +389,8 @@ TEST(Pack, OversizedHeaderIsRefusedBeforeAllocation) {
   const std::string window = std::string("dataWindow") + '\0' + "box2i" + '\0' +
                              std::string("\x10\x00\x00\x00", 4) + std::string(8, '\0') +
                              std::string("\x0f\x00\x00\x00\x0f\x00\x00\x00", 8);
-  const std::string forged = window.substr(0, window.size() - 8) +
-                             std::string("\xff\xff\xff\x3f\xff\xff\xff\x3f", 8);
+  const std::string forged =
+      window.substr(0, window.size() - 8) + std::string("\xff\xff\xff\x3f\xff\xff\xff\x3f", 8);
   ASSERT_TRUE(Patch(bytes, window, forged));
   WriteBytes(dir / "big.pack.exr", bytes);
   auto r = ReadPack(dir / "big.pack.exr");

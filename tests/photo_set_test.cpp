@@ -769,7 +769,8 @@ TEST_F(PhotoSetTest, DISABLED_Load64Photos2048) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Absurd inputs (docs/refusals.md): intrinsics, canvas footprint, duplicate images, extra .lp columns.
+// Absurd inputs (docs/refusals.md): intrinsics, canvas footprint, duplicate images, extra .lp
+// columns.
 
 TEST_F(CalibrationTest, AbsurdIntrinsicsAreRefusedNamingTheEntry) {
   // fx = 1e-300 "fitted 76.9 % converged": a 180-degree view in which the canvas is one pixel.

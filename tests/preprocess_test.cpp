@@ -1,12 +1,13 @@
-// End-to-end acceptance of "preprocess scanned height maps" (docs/architecture.md), measured against
-// the synthetic generator's ground truth, plus the stress cases: each gets a correct result or a
-// clear error, never a crash and never a NaN in an output.
+// End-to-end acceptance of "preprocess scanned height maps" (docs/architecture.md), measured
+// against the synthetic generator's ground truth, plus the stress cases: each gets a correct result
+// or a clear error, never a crash and never a NaN in an output.
+#include "digitize/preprocess.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdlib>
 
-#include "digitize/preprocess.h"
 #include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
@@ -37,10 +38,11 @@ int MatchedResolution(const synth::ScanSimOptions& scan, const synth::FrameOptio
 }
 
 PipelineRun RunPipeline(synth::PaintingOptions painting_options, const synth::FrameOptions& frame,
-                const synth::ScanSimOptions& scan_options,
-                const PreprocessOptions& options = PreprocessOptions{}) {
+                        const synth::ScanSimOptions& scan_options,
+                        const PreprocessOptions& options = PreprocessOptions{}) {
   PipelineRun run;
-  if (painting_options.resolution_px == 0) painting_options.resolution_px = MatchedResolution(scan_options, frame);
+  if (painting_options.resolution_px == 0)
+    painting_options.resolution_px = MatchedResolution(scan_options, frame);
   run.painting = synth::MakePainting(painting_options);
   const synth::Scene scene(run.painting, frame);
   run.scan = synth::SimulateScan(scene, scan_options);
@@ -67,7 +69,8 @@ synth::PaintingOptions DefaultPainting() {
 }
 
 TEST(Preprocess, DefaultSyntheticScanMeetsAccuracyTargets) {
-  synth::ScanSimOptions scan;  // defaults: 512^2, noise, dropouts, blob holes, outliers, tilt, roll, offset
+  synth::ScanSimOptions
+      scan;  // defaults: 512^2, noise, dropouts, blob holes, outliers, tilt, roll, offset
   const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
   ASSERT_TRUE(run.result.ok()) << run.result.error().message;
   ExpectAllFinite(*run.result);
@@ -81,8 +84,9 @@ TEST(Preprocess, DefaultSyntheticScanMeetsAccuracyTargets) {
   EXPECT_FALSE(run.result->relief.boxes.empty());
   // Reported, not asserted: the normals' median error at the default noise.
   RecordProperty("normals_median_deg_default_noise", std::to_string(a.normals_median_deg));
-  std::printf("default noise %.3f mm: tilt err %.4f deg, IoU %.5f, RMSE %.4f mm, normals median %.3f deg\n",
-              scan.noise_mm, a.normal_error_deg, a.mask_iou, a.height_rmse_mm, a.normals_median_deg);
+  std::printf(
+      "default noise %.3f mm: tilt err %.4f deg, IoU %.5f, RMSE %.4f mm, normals median %.3f deg\n",
+      scan.noise_mm, a.normal_error_deg, a.mask_iou, a.height_rmse_mm, a.normals_median_deg);
 }
 
 TEST(Preprocess, NoiseFreeScanGivesAccurateNormals) {
@@ -226,7 +230,8 @@ Scan GridScan(int w, int h, float value) {
 }
 
 TEST(PreprocessStress, TinyScansGiveResultOrClearError) {
-  for (auto [w, h] : {std::pair{8, 8}, std::pair{1, 64}, std::pair{64, 1}, std::pair{1, 1}, std::pair{0, 0}}) {
+  for (auto [w, h] :
+       {std::pair{8, 8}, std::pair{1, 64}, std::pair{64, 1}, std::pair{1, 1}, std::pair{0, 0}}) {
     Result<PreprocessResult> r = Preprocess({GridScan(w, h, 100.0f)}, PreprocessOptions{});
     if (r.ok()) {
       ExpectAllFinite(*r);
@@ -256,8 +261,10 @@ TEST(PreprocessStress, SomeInfAndHugeValuesAreCleanedNotPropagated) {
   const synth::Scene scene(p, synth::FrameOptions{});
   synth::SyntheticScan s = synth::SimulateScan(scene, scan_options);
   Scan& scan = s.exposures.front();
-  for (size_t i = 0; i < scan.xyz_mm.size(); i += 97) scan.xyz_mm.data[i].z() = std::numeric_limits<float>::infinity();
-  for (size_t i = 13; i < scan.xyz_mm.size(); i += 101) scan.xyz_mm.data[i] = Vec3f(1e30f, -1e30f, 1e30f);
+  for (size_t i = 0; i < scan.xyz_mm.size(); i += 97)
+    scan.xyz_mm.data[i].z() = std::numeric_limits<float>::infinity();
+  for (size_t i = 13; i < scan.xyz_mm.size(); i += 101)
+    scan.xyz_mm.data[i] = Vec3f(1e30f, -1e30f, 1e30f);
   Result<PreprocessResult> r = Preprocess(s.exposures, PreprocessOptions{});
   ASSERT_TRUE(r.ok()) << r.error().message;
   ExpectAllFinite(*r);

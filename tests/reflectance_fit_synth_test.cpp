@@ -30,7 +30,7 @@ struct Case {
 };
 
 Case FitSynthetic(int long_side, bool noise, std::vector<synth::PaintMaterial> materials = {},
-         ReflectanceFitOptions options = {}, int lights = 64) {
+                  ReflectanceFitOptions options = {}, int lights = 64) {
   Case c;
   synth::PaintingOptions po;
   po.resolution_px = long_side;
@@ -69,14 +69,15 @@ TEST(ReflectanceFitSynth, NoiseFreeHeldOutPsnrAtLeast40dB) {
   const Case c = FitSynthetic(240, false);
   EXPECT_GE(c.score.psnr_db, 40.0);
   EXPECT_GT(c.score.pixels, 20000u);
-  const auto regions = synth::MeasureReflectanceAccuracy(c.fit.maps, c.painting.truth, {},
-                                                         c.photos, c.painting);
+  const auto regions =
+      synth::MeasureReflectanceAccuracy(c.fit.maps, c.painting.truth, {}, c.photos, c.painting);
   std::printf("%s", synth::FormatReflectanceAccuracy(regions).c_str());
   ASSERT_GE(regions.size(), 5u);
   for (const auto& r : regions) {
     // Noise-free samples of the fitted family: rho_d within 1 % wherever the painting is.
     EXPECT_LT(r.rho_d_rel_median, 0.01) << r.name;
-    if (r.name.find("satin") != std::string::npos || r.name.find("semi-gloss") != std::string::npos ||
+    if (r.name.find("satin") != std::string::npos ||
+        r.name.find("semi-gloss") != std::string::npos ||
         r.name.find("gloss (") != std::string::npos) {
       // Lobes wider than the light spacing (k <= 100) are recovered: k within 12 %, albedo 0.005.
       EXPECT_LT(r.log10_k_abs_median, 0.05) << r.name;
@@ -122,18 +123,18 @@ synth::PaintMaterial OneLobe(const char* name, Vec3f albedo, float spec_albedo, 
 // status per texel, and relighting that stays close.
 TEST(ReflectanceFitSynth, StressMaterials) {
   const Case c = FitSynthetic(160, true,
-                     {OneLobe("k = 1", {0.3f, 0.3f, 0.3f}, 0.2f, 1.0f),
-                      OneLobe("k = 1000", {0.2f, 0.1f, 0.1f}, 0.05f, 1000.0f),
-                      OneLobe("black", {0, 0, 0}, 0.0f, 1.0f),
-                      OneLobe("saturating gloss", {0.7f, 0.7f, 0.7f}, 0.25f, 60.0f)});
+                              {OneLobe("k = 1", {0.3f, 0.3f, 0.3f}, 0.2f, 1.0f),
+                               OneLobe("k = 1000", {0.2f, 0.1f, 0.1f}, 0.05f, 1000.0f),
+                               OneLobe("black", {0, 0, 0}, 0.0f, 1.0f),
+                               OneLobe("saturating gloss", {0.7f, 0.7f, 0.7f}, 0.25f, 60.0f)});
   EXPECT_GT(c.fit.report.samples.saturated, 1000u);
   EXPECT_GT(c.fit.report.samples.black, 0u);
   // The k = 1000 lobe (0.3 degrees wide, peak 20x white) is narrower than the light spacing and
   // clips wherever a light meets it: its peak is never measured, so held-out highlights on it are
   // missed (its texels fit diffuse-only or a wide lobe). Measured 29.9 dB; floor 27 dB.
   EXPECT_GE(c.score.psnr_db, 27.0);
-  const auto regions = synth::MeasureReflectanceAccuracy(c.fit.maps, c.painting.truth, {},
-                                                         c.photos, c.painting);
+  const auto regions =
+      synth::MeasureReflectanceAccuracy(c.fit.maps, c.painting.truth, {}, c.photos, c.painting);
   std::printf("%s", synth::FormatReflectanceAccuracy(regions).c_str());
   for (const auto& r : regions) {
     if (r.name == "k = 1") {

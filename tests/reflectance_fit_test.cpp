@@ -40,7 +40,8 @@ Light Directional(double elevation_deg, double azimuth_deg, float irradiance = 1
   const double e = elevation_deg * M_PI / 180, a = azimuth_deg * M_PI / 180;
   Light l;
   l.type = LightType::kDirectional;
-  l.direction = Vec3d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)).normalized();
+  l.direction =
+      Vec3d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e)).normalized();
   l.irradiance = Vec3f::Constant(irradiance);
   return l;
 }
@@ -75,7 +76,9 @@ std::vector<Light> Dome(int n, double min_elev = 20, double max_elev = 80) {
   return out;
 }
 
-Grid<Vec3f> UpNormals(const HeightField& f) { return Grid<Vec3f>(f.width(), f.height(), Vec3f::UnitZ()); }
+Grid<Vec3f> UpNormals(const HeightField& f) {
+  return Grid<Vec3f>(f.width(), f.height(), Vec3f::UnitZ());
+}
 
 TEST(ReflectanceSamples, FlatCanvasSamplesAreExact) {
   const HeightField canvas = FlatCanvas(12, 10);
@@ -219,7 +222,7 @@ TEST(ReflectanceFit, LightsAtAndBelowTheHorizonAreRejectedNotFitted) {
   std::vector<Light> lights = Dome(12);
   lights.push_back(Directional(-10, 0));  // below the canvas
   lights.push_back(Directional(-89, 45));
-  lights.push_back(Directional(1, 90));   // grazing: 89 deg from the normal, kept
+  lights.push_back(Directional(1, 90));  // grazing: 89 deg from the normal, kept
   PhotoSet set = RenderFlat(canvas, m, lights);
   // Below the canvas the photos show what an actual light there would: nothing.
   for (size_t i = 12; i < 14; ++i)

@@ -41,7 +41,8 @@ Grid<uint8_t> ExpectedValid(const HeightField& f, const ReliefOptions& o, double
   const double delta0 = o.delta0_fraction * H;
   *delta0_out = delta0;
   for (size_t i = 0; i < mv.size(); ++i)
-    mv.data[i] = HasHeight(f.state.data[i]) && f.height_mm.data[i] > delta0 - std::min(o.noise_margin_mm, 0.5 * delta0);
+    mv.data[i] = HasHeight(f.state.data[i]) &&
+                 f.height_mm.data[i] > delta0 - std::min(o.noise_margin_mm, 0.5 * delta0);
   Grid<int> label(f.width(), f.height(), 0);
   int next = 0;
   for (int y = 0; y < f.height(); ++y)
@@ -460,7 +461,7 @@ TEST(Relief, FlatCanvasBelowTheReliefFloorHasNoBoxes) {
   ReliefOptions no_floor;
   no_floor.min_relief_mm = 0.0;
   no_floor.min_component_area_mm2 = 0.0;  // one texel is 0.0625 mm^2: not a speck here
-  r = ClassifyRelief(f, no_floor);  // without a floor the same dust becomes a box
+  r = ClassifyRelief(f, no_floor);        // without a floor the same dust becomes a box
   EXPECT_EQ(r.boxes.size(), 1u);
   ReliefOptions bad;
   bad.min_relief_mm = -1;

@@ -65,8 +65,10 @@ bool SameBytes(const Grid<T>& a, const Grid<T>& b) {
 // Bilinear truth height at canvas-frame (X, Y) (the grid convention of height_field.h).
 double TruthHeightAt(const HeightField& f, double X, double Y) {
   Eigen::Vector2d t = f.TexelFromMm(X, Y);
-  double tx = std::clamp(t.x(), 0.0, f.width() - 1.0), ty = std::clamp(t.y(), 0.0, f.height() - 1.0);
-  int x0 = std::min(static_cast<int>(tx), f.width() - 2), y0 = std::min(static_cast<int>(ty), f.height() - 2);
+  double tx = std::clamp(t.x(), 0.0, f.width() - 1.0),
+         ty = std::clamp(t.y(), 0.0, f.height() - 1.0);
+  int x0 = std::min(static_cast<int>(tx), f.width() - 2),
+      y0 = std::min(static_cast<int>(ty), f.height() - 2);
   double fx = tx - x0, fy = ty - y0;
   const Grid<float>& h = f.height_mm;
   return (1 - fy) * ((1 - fx) * h(x0, y0) + fx * h(x0 + 1, y0)) +
@@ -206,7 +208,7 @@ TEST(Painting, FeatureHeightsAreInTheirRanges) {
   impasto.impasto = true;
   Painting i = MakePainting(impasto);
   EXPECT_GE(MinHeight(i), 0.0f);
-  EXPECT_GT(MaxHeight(i), 0.35 * impasto.impasto_max_mm);  // the lowest blob is 35 % of the max
+  EXPECT_GT(MaxHeight(i), 0.35 * impasto.impasto_max_mm);     // the lowest blob is 35 % of the max
   EXPECT_LT(MaxHeight(i), 2 * 1.4 * impasto.impasto_max_mm);  // knife pile-up, overlap
 
   PaintingOptions cracks = base;
@@ -294,10 +296,10 @@ TEST(Scene, RaysHitCanvasFrameAndWallWhereExpected) {
   Scene scene(p, frame);
   const double cx = 0.5 * p.width_mm, cy = 0.5 * p.height_mm;
   std::vector<Vec3d> origins = {
-      {cx, cy, 500},                                  // canvas centre, straight down
-      {-0.05 * frame.width_mm, cy, 500},              // the frame's sight edge (flat, raise_mm)
-      {-frame.width_mm - 10, cy, 500},                // beyond the frame: the wall
-      {cx, cy, 500},                                  // pointing away: nothing
+      {cx, cy, 500},                      // canvas centre, straight down
+      {-0.05 * frame.width_mm, cy, 500},  // the frame's sight edge (flat, raise_mm)
+      {-frame.width_mm - 10, cy, 500},    // beyond the frame: the wall
+      {cx, cy, 500},                      // pointing away: nothing
   };
   std::vector<Vec3d> dirs = {{0, 0, -1}, {0, 0, -2}, {0, 0, -1}, {0, 0, 1}};
   std::vector<Scene::RayHit> hits;
@@ -458,7 +460,8 @@ TEST(Scan, SameSeedSameScanOtherSeedOtherNoise) {
   o.exposures = 2;
   SyntheticScan a = SimulateScan(scene, o), b = SimulateScan(scene, o);
   ASSERT_EQ(a.exposures.size(), 2u);
-  for (size_t e = 0; e < 2; ++e) EXPECT_TRUE(SameBytes(a.exposures[e].xyz_mm, b.exposures[e].xyz_mm));
+  for (size_t e = 0; e < 2; ++e)
+    EXPECT_TRUE(SameBytes(a.exposures[e].xyz_mm, b.exposures[e].xyz_mm));
   EXPECT_TRUE(SameBytes(a.hit_scan, b.hit_scan));
   o.seed = 4;
   SyntheticScan c = SimulateScan(scene, o);
@@ -564,7 +567,7 @@ TEST(Scan, MaskFractionsAndLossesArePlausible) {
   // Canvas 200 x 150 inside a 45 mm frame, field 1.25 x the footprint: canvas ~ 0.3 of the view.
   EXPECT_GT(hits[1] / total, 0.2);
   EXPECT_LT(hits[1] / total, 0.5);
-  EXPECT_GT(hits[2] / total, 0.1);  // frame
+  EXPECT_GT(hits[2] / total, 0.1);   // frame
   EXPECT_GT(hits[3] / total, 0.05);  // wall
   EXPECT_EQ(hits[0], 0u);            // the wall fills every view
   size_t mask = 0;
@@ -649,7 +652,8 @@ TEST(Scan, PinholeSamplesLieOnTheirRays) {
     for (int x = 0; x < o.width_px; ++x) {
       const Vec3f& v = s.exposures[0].xyz_mm(x, y);
       if (!IsValid(v)) continue;
-      Vec3d ray((x + 0.5 - 0.5 * o.width_px) / s.focal_px, (y + 0.5 - 0.5 * o.height_px) / s.focal_px, 1);
+      Vec3d ray((x + 0.5 - 0.5 * o.width_px) / s.focal_px,
+                (y + 0.5 - 0.5 * o.height_px) / s.focal_px, 1);
       worst_deg = std::max(worst_deg, AngleDeg(ray, v.cast<double>()));
       canvas += s.canvas_mask_scan(x, y);
     }
@@ -674,7 +678,8 @@ TEST(Scan, TiltedPoseIsARotationWithTheAskedTilt) {
     // The canvas normal (canvas +Z, row 2) against the direction back to the scanner (scan -Z).
     EXPECT_NEAR(AngleDeg(r.row(2).transpose(), Vec3d(0, 0, -1)), tilt, 1e-9);
     // The canvas centre is where the offset puts it.
-    Vec3d centre = s.canvas_from_scan.Inverse().Apply(Vec3d(0.5 * p.width_mm, 0.5 * p.height_mm, 0));
+    Vec3d centre =
+        s.canvas_from_scan.Inverse().Apply(Vec3d(0.5 * p.width_mm, 0.5 * p.height_mm, 0));
     EXPECT_LT((centre - Vec3d(o.offset_mm.x(), o.offset_mm.y(), o.distance_mm)).norm(), 1e-9);
     size_t canvas = 0;
     for (uint8_t m : s.canvas_mask_scan.data) canvas += m;
@@ -834,9 +839,9 @@ TEST_F(SynthIo, WritesScanAndGroundTruthThatReadBack) {
   SyntheticScan s = SimulateScan(scene, so);
   Status st = WriteSyntheticScan(dir_, p, s);
   ASSERT_TRUE(st.ok()) << st.message();
-  for (const char* name : {"scan_0.exr", "scan_1.exr", "truth_height.exr", "truth_normals.exr",
-                           "truth_regions.png", "truth_mask_scan.png", "truth_hit_scan.png",
-                           "truth.json"})
+  for (const char* name :
+       {"scan_0.exr", "scan_1.exr", "truth_height.exr", "truth_normals.exr", "truth_regions.png",
+        "truth_mask_scan.png", "truth_hit_scan.png", "truth.json"})
     EXPECT_TRUE(fs::exists(dir_ / name)) << name;
   EXPECT_FALSE(fs::exists(dir_ / "scan.exr"));
 

@@ -1,5 +1,5 @@
-// Preprocessing on scans unlike the generator's defaults (docs/refusals.md, "Scans"): a perspective scan
-// from 1 m of an off-centre, rotated canvas tilted about a diagonal, bowed, in an asymmetric
+// Preprocessing on scans unlike the generator's defaults (docs/refusals.md, "Scans"): a perspective
+// scan from 1 m of an off-centre, rotated canvas tilted about a diagonal, bowed, in an asymmetric
 // bevelled frame, with dropouts; variants with border holes and with a frame lip. Each is built
 // in memory and measured against the generator's ground truth.
 #include <gtest/gtest.h>

@@ -1,8 +1,9 @@
-// Packs are shared between institutions, so a pack is untrusted input (docs/refusals.md, "Packs and shared files"):
-// what `digitize inspect` / `verify` and `digitize-viewer` do with hostile packs -- provenance
-// that holds terminal escapes and forged lines, a forged header with a recomputed checksum, a
-// pack the viewer cannot hang -- and with screenshot sizes no GL can render. The library-level
-// refusals are in pack_test (bounds), viewer_test (set-up) and photo_set_test (paths).
+// Packs are shared between institutions, so a pack is untrusted input (docs/refusals.md, "Packs and
+// shared files"): what `digitize inspect` / `verify` and `digitize-viewer` do with hostile packs --
+// provenance that holds terminal escapes and forged lines, a forged header with a recomputed
+// checksum, a pack the viewer cannot hang -- and with screenshot sizes no GL can render. The
+// library-level refusals are in pack_test (bounds), viewer_test (set-up) and photo_set_test
+// (paths).
 #include <gtest/gtest.h>
 #include <unistd.h>
 

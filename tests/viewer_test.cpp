@@ -1,7 +1,7 @@
-// Viewer (seed 001, section 5): headless renders of a synthetic painting against the Embree reference
-// (RenderRelit on the full height field, same camera, light and shading), per technique and per
-// paper view; relief vs bump at grazing impasto; a flat-height lookup; no popping along a slow
-// path across the adaptive thresholds; packs that fail to load.
+// Viewer (seed 001, section 5): headless renders of a synthetic painting against the Embree
+// reference (RenderRelit on the full height field, same camera, light and shading), per technique
+// and per paper view; relief vs bump at grazing impasto; a flat-height lookup; no popping along a
+// slow path across the adaptive thresholds; packs that fail to load.
 //
 // Images are 256 x 192 so the suite stays fast on 2 cores (and under ASan). PSNR peak: radiance
 // 1 = paper white under the standard light (scene_setup.h).

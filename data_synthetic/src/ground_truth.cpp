@@ -7,9 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <vector>
-
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 namespace digitize::synth {
 namespace {
@@ -49,7 +48,8 @@ struct TruthSampler {
 // Median and a higher quantile of a sample (reorders it); NaN when empty.
 double Quantile(std::vector<float>& v, double q) {
   if (v.empty()) return kNaN;
-  size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+  size_t k =
+      std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
   return v[k];
 }
@@ -65,8 +65,8 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
   const RigidTransform est_from_truth = truth_from_est.Inverse();
 
   // Canvas plane: the Z axis of a canvas frame, seen from the scan frame, is the rotation's row 2.
-  acc.normal_error_deg = AngleDeg(est_cfs.rotation.row(2).transpose(),
-                                  truth_cfs.rotation.row(2).transpose());
+  acc.normal_error_deg =
+      AngleDeg(est_cfs.rotation.row(2).transpose(), truth_cfs.rotation.row(2).transpose());
 
   {
     const Vec3d x_est = truth_from_est.rotation.col(0);
@@ -113,27 +113,28 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
   const float nan_f = std::numeric_limits<float>::quiet_NaN();
   Grid<float> height_err(est.width(), est.height(), nan_f);
   Grid<float> normal_err(est.width(), est.height(), nan_f);
-  tbb::parallel_for(tbb::blocked_range<int>(0, est.height(), 16), [&](const tbb::blocked_range<int>& r) {
-    for (int y = r.begin(); y < r.end(); ++y) {
-      for (int x = 0; x < est.width(); ++x) {
-        if (!HasHeight(est.state(x, y))) continue;
-        Eigen::Vector2d c = est.TexelCentreMm(x, y);
-        Vec3d p = truth_from_est.Apply(Vec3d(c.x(), c.y(), est.height_mm(x, y)));
-        double true_h;
-        Vec3d true_n;
-        if (!truth.Sample(p.x(), p.y(), true_h, &true_n)) continue;
-        height_err(x, y) = static_cast<float>((p.z() - true_h) * true_n.z());
-        if (!have_normals || x == 0 || y == 0 || x == est.width() - 1 || y == est.height() - 1)
-          continue;
-        bool full = true;
-        for (int dy = -1; dy <= 1 && full; ++dy)
-          for (int dx = -1; dx <= 1 && full; ++dx) full = HasHeight(est.state(x + dx, y + dy));
-        if (!full) continue;
-        Vec3d n = truth_from_est.ApplyToDirection(result.normals(x, y).cast<double>());
-        normal_err(x, y) = static_cast<float>(AngleDeg(n, true_n));
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, est.height(), 16), [&](const tbb::blocked_range<int>& r) {
+        for (int y = r.begin(); y < r.end(); ++y) {
+          for (int x = 0; x < est.width(); ++x) {
+            if (!HasHeight(est.state(x, y))) continue;
+            Eigen::Vector2d c = est.TexelCentreMm(x, y);
+            Vec3d p = truth_from_est.Apply(Vec3d(c.x(), c.y(), est.height_mm(x, y)));
+            double true_h;
+            Vec3d true_n;
+            if (!truth.Sample(p.x(), p.y(), true_h, &true_n)) continue;
+            height_err(x, y) = static_cast<float>((p.z() - true_h) * true_n.z());
+            if (!have_normals || x == 0 || y == 0 || x == est.width() - 1 || y == est.height() - 1)
+              continue;
+            bool full = true;
+            for (int dy = -1; dy <= 1 && full; ++dy)
+              for (int dx = -1; dx <= 1 && full; ++dx) full = HasHeight(est.state(x + dx, y + dy));
+            if (!full) continue;
+            Vec3d n = truth_from_est.ApplyToDirection(result.normals(x, y).cast<double>());
+            normal_err(x, y) = static_cast<float>(AngleDeg(n, true_n));
+          }
+        }
+      });
   std::vector<float> errors, angles;
   for (float e : height_err.data)
     if (std::isfinite(e)) errors.push_back(e);
@@ -156,20 +157,22 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
   // Relief coverage: true relief above the estimate's bump plane, specks removed, must be boxed.
   const HeightField& tf = painting.truth;
   Grid<uint8_t> above(tf.width(), tf.height(), 0);
-  Grid<Eigen::Vector2f> in_est(tf.width(), tf.height(), Eigen::Vector2f::Zero());  // estimate texel coordinates
+  Grid<Eigen::Vector2f> in_est(tf.width(), tf.height(),
+                               Eigen::Vector2f::Zero());  // estimate texel coordinates
   // A bump plane at or below zero (an estimate that found no relief) must not turn float
   // rounding on a flat canvas into "relief": nothing under a micrometre counts.
   const double delta0 = std::max(result.relief.delta0_mm, kMinReliefMm);
-  tbb::parallel_for(tbb::blocked_range<int>(0, tf.height(), 16), [&](const tbb::blocked_range<int>& r) {
-    for (int y = r.begin(); y < r.end(); ++y) {
-      for (int x = 0; x < tf.width(); ++x) {
-        Eigen::Vector2d c = tf.TexelCentreMm(x, y);
-        Vec3d p = est_from_truth.Apply(Vec3d(c.x(), c.y(), tf.height_mm(x, y)));
-        above(x, y) = p.z() > delta0 ? 1 : 0;
-        in_est(x, y) = est.TexelFromMm(p.x(), p.y()).cast<float>();
-      }
-    }
-  });
+  tbb::parallel_for(tbb::blocked_range<int>(0, tf.height(), 16),
+                    [&](const tbb::blocked_range<int>& r) {
+                      for (int y = r.begin(); y < r.end(); ++y) {
+                        for (int x = 0; x < tf.width(); ++x) {
+                          Eigen::Vector2d c = tf.TexelCentreMm(x, y);
+                          Vec3d p = est_from_truth.Apply(Vec3d(c.x(), c.y(), tf.height_mm(x, y)));
+                          above(x, y) = p.z() > delta0 ? 1 : 0;
+                          in_est(x, y) = est.TexelFromMm(p.x(), p.y()).cast<float>();
+                        }
+                      }
+                    });
   cv::Mat above_mat(tf.height(), tf.width(), CV_8U, above.data.data());
   cv::Mat labels, stats, centroids;
   int n_labels = cv::connectedComponentsWithStats(above_mat, labels, stats, centroids, 8, CV_32S);
@@ -182,7 +185,8 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
   Grid<uint8_t> boxed(est.width(), est.height(), 0);
   for (const ReliefBox& b : result.relief.boxes)
     for (int y = std::max(0, b.y0); y < std::min(est.height(), b.y0 + b.height); ++y)
-      for (int x = std::max(0, b.x0); x < std::min(est.width(), b.x0 + b.width); ++x) boxed(x, y) = 1;
+      for (int x = std::max(0, b.x0); x < std::min(est.width(), b.x0 + b.width); ++x)
+        boxed(x, y) = 1;
 
   for (int y = 0; y < tf.height(); ++y) {
     const int* row = labels.ptr<int>(y);

@@ -227,19 +227,19 @@ enum class StrokeKind { kBrush, kKnife };
 
 struct Stroke {
   StrokeKind kind = StrokeKind::kBrush;
-  double cx = 0, cy = 0, radius = 0;   // arc centre and radius (mm)
+  double cx = 0, cy = 0, radius = 0;  // arc centre and radius (mm)
   double theta_mid = 0, half_angle = 0;
-  double turn = 1;                     // +1 / -1: direction of travel along the arc
+  double turn = 1;  // +1 / -1: direction of travel along the arc
   double length_mm = 0, half_width_mm = 0;
   double wobble = 0, wobble_cycles = 0, wobble_phase = 0;  // width variation along the stroke
   double height_mm = 0;
-  double edge_mm = 0;                  // wall width after band-limiting
-  double end_mm = 0, start_mm = 0;     // taper lengths at the ends
-  BlurredGaussian ridge;               // brush: ridges of paint pushed to the stroke's edges
+  double edge_mm = 0;               // wall width after band-limiting
+  double end_mm = 0, start_mm = 0;  // taper lengths at the ends
+  BlurredGaussian ridge;            // brush: ridges of paint pushed to the stroke's edges
   double ridge_inset_mm = 0;
   double stria_period_mm = 1, stria_amp = 0, stria_phase = 0;  // bristle marks (faded)
-  double knife_tilt = 0;               // knife: top tilted across the stroke
-  BlurredGaussian pile;                // knife: paint piled up at the end of the stroke
+  double knife_tilt = 0;  // knife: top tilted across the stroke
+  BlurredGaussian pile;   // knife: paint piled up at the end of the stroke
   uint8_t region = 0;
   Box2 bounds;
 
@@ -323,11 +323,11 @@ struct CrackLevel {
   double cell_mm = 8, jitter = 0.85;
   double depth_mm = 0;
   BlurredGaussian groove, lip;
-  double lip_share = 0.15;           // cupping: paint islands curl up beside the crack
+  double lip_share = 0.15;  // cupping: paint islands curl up beside the crack
   double smin_mm = 0.05;
   Waves warp_x, warp_y;
-  double max_warp_mm = 0;            // bound on |warp| per axis
-  Waves presence;                    // > 0 where this level's cracks exist
+  double max_warp_mm = 0;  // bound on |warp| per axis
+  Waves presence;          // > 0 where this level's cracks exist
   bool use_presence = false;
   uint64_t seed = 0;
 
@@ -470,8 +470,8 @@ struct Model {
   double pitch_mm = 1;
   bool weave_on = false, craquelure_on = false;
   Weave weave;
-  std::vector<Stroke> strokes;   // painting order: strokes first ...
-  std::vector<Blob> blobs;       // ... then impasto on top
+  std::vector<Stroke> strokes;  // painting order: strokes first ...
+  std::vector<Blob> blobs;      // ... then impasto on top
   std::vector<CrackLevel> cracks;
   Regions regions;
   std::vector<Waves*> waves;  // every field, in slot order (see AssignSlots)
@@ -538,8 +538,8 @@ Model BuildModel(const PaintingOptions& o, double w, double h, double pitch) {
     m.weave.wander_x = Waves::Random(rng, 3, 0.08 * o.weave_period_mm, 20, 80);
     m.weave.wander_y = Waves::Random(rng, 3, 0.08 * o.weave_period_mm, 20, 80);
     m.weave.amplitude_mod = Waves::Random(rng, 3, 0.2, 30, 150);
-    m.weave_on = o.weave && m.weave.amplitude_mm > 0 &&
-                 (m.weave.fade_cross > 0 || m.weave.fade_threads > 0);
+    m.weave_on =
+        o.weave && m.weave.amplitude_mm > 0 && (m.weave.fade_cross > 0 || m.weave.fade_threads > 0);
   }
 
   {  // Regions (always drawn so later streams do not shift when features are switched)
@@ -639,8 +639,9 @@ Model BuildModel(const PaintingOptions& o, double w, double h, double pitch) {
         b.swirl_period_mm = Uniform(rng, 0.8, 2.5);
         b.swirl_amp = 0.06 * Fade(b.swirl_period_mm, pitch);
         b.region = region_of(rng);
-        double reach = b.radius_mm * (1 + b.harmonic_amp[0] + b.harmonic_amp[1] +
-                                      b.harmonic_amp[2]) + b.wall_mm + 1.0;
+        double reach =
+            b.radius_mm * (1 + b.harmonic_amp[0] + b.harmonic_amp[1] + b.harmonic_amp[2]) +
+            b.wall_mm + 1.0;
         b.bounds = {b.cx - reach, b.cy - reach, b.cx + reach, b.cy + reach};
         m.blobs.push_back(b);
       }
@@ -756,65 +757,70 @@ Painting MakePainting(const PaintingOptions& options) {
   for (size_t i = 0; i < model.blobs.size(); ++i)
     bin(model.blobs[i].bounds, static_cast<int>(i), tile_blobs);
 
-  tbb::parallel_for(
-      tbb::blocked_range2d<int>(0, tiles_y, 1, 0, tiles_x, 1),
-      [&](const tbb::blocked_range2d<int>& range) {
-        for (int ty = range.rows().begin(); ty < range.rows().end(); ++ty) {
-          for (int tx = range.cols().begin(); tx < range.cols().end(); ++tx) {
-            size_t tile = static_cast<size_t>(ty) * tiles_x + tx;
-            const std::vector<int>& strokes = tile_strokes[tile];
-            const std::vector<int>& blobs = tile_blobs[tile];
-            int y_end = std::min(h_px, (ty + 1) * kTilePx);
-            int x_end = std::min(w_px, (tx + 1) * kTilePx);
-            const Box2 tile_mm{tx * kTilePx * pitch, p.height_mm - y_end * pitch,
-                               x_end * pitch, p.height_mm - ty * kTilePx * pitch};
-            const std::vector<int> region_sites = model.regions.Candidates(tile_mm);
-            std::vector<CrackLevel::Sites> crack_sites;
-            for (const CrackLevel& crack : model.cracks)
-              crack_sites.push_back(crack.CacheSites(tile_mm));
-            std::vector<double> xs, ys;
-            for (int x = tx * kTilePx; x < x_end; ++x) xs.push_back((x + 0.5) * pitch);
-            for (int y = ty * kTilePx; y < y_end; ++y) ys.push_back(p.height_mm - (y + 0.5) * pitch);
-            std::vector<WaveTable> tables;
-            for (const Waves* w : model.waves) tables.push_back(w->Tabulate(xs, ys));
-            for (int y = ty * kTilePx; y < y_end; ++y) {
-              for (int x = tx * kTilePx; x < x_end; ++x) {
-                const Eigen::Vector2d c(xs[x - tx * kTilePx], ys[y - ty * kTilePx]);
-                const At at{tables.data(), x - tx * kTilePx, y - ty * kTilePx};
-                J X(c.x(), 0), Y(c.y(), 1);
-                uint8_t region = model.regions(c.x(), c.y(), region_sites, at);
-                J paint(0.0);
-                for (int i : strokes) {
-                  const Stroke& s = model.strokes[static_cast<size_t>(i)];
-                  if (!s.bounds.Contains(c.x(), c.y())) continue;
-                  J t = s(X, Y);
-                  paint += t;
-                  if (t.a >= kRegionCoverShare * s.height_mm && t.a > 0) region = s.region;
-                }
-                for (int i : blobs) {
-                  const Blob& b = model.blobs[static_cast<size_t>(i)];
-                  if (!b.bounds.Contains(c.x(), c.y())) continue;
-                  J t = b(X, Y);
-                  paint += t;
-                  if (t.a >= kRegionCoverShare * b.height_mm && t.a > 0) region = b.region;
-                }
-                J h = paint;
-                if (model.weave_on) h += model.weave(X, Y, at) * exp(-paint / kWeaveBurialMm);
-                for (size_t k = 0; k < model.cracks.size(); ++k)
-                  h += model.cracks[k](X, Y, crack_sites[k], at);
-                if (options.bow_mm != 0) {
-                  const J u = 2.0 * X / p.width_mm - 1.0, v = 2.0 * Y / p.height_mm - 1.0;
-                  h += options.bow_mm * (1.0 - u * u) * (1.0 - v * v);
-                }
-                p.truth.height_mm(x, y) = static_cast<float>(h.a);
-                Vec3d n(-h.v[0], -h.v[1], 1.0);
-                p.normals(x, y) = n.normalized().cast<float>();
-                p.region(x, y) = region;
-              }
-            }
-          }
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range2d<int>(0, tiles_y, 1, 0, tiles_x, 1),
+                    [&](const tbb::blocked_range2d<int>& range) {
+                      for (int ty = range.rows().begin(); ty < range.rows().end(); ++ty) {
+                        for (int tx = range.cols().begin(); tx < range.cols().end(); ++tx) {
+                          size_t tile = static_cast<size_t>(ty) * tiles_x + tx;
+                          const std::vector<int>& strokes = tile_strokes[tile];
+                          const std::vector<int>& blobs = tile_blobs[tile];
+                          int y_end = std::min(h_px, (ty + 1) * kTilePx);
+                          int x_end = std::min(w_px, (tx + 1) * kTilePx);
+                          const Box2 tile_mm{tx * kTilePx * pitch, p.height_mm - y_end * pitch,
+                                             x_end * pitch, p.height_mm - ty * kTilePx * pitch};
+                          const std::vector<int> region_sites = model.regions.Candidates(tile_mm);
+                          std::vector<CrackLevel::Sites> crack_sites;
+                          for (const CrackLevel& crack : model.cracks)
+                            crack_sites.push_back(crack.CacheSites(tile_mm));
+                          std::vector<double> xs, ys;
+                          for (int x = tx * kTilePx; x < x_end; ++x)
+                            xs.push_back((x + 0.5) * pitch);
+                          for (int y = ty * kTilePx; y < y_end; ++y)
+                            ys.push_back(p.height_mm - (y + 0.5) * pitch);
+                          std::vector<WaveTable> tables;
+                          for (const Waves* w : model.waves) tables.push_back(w->Tabulate(xs, ys));
+                          for (int y = ty * kTilePx; y < y_end; ++y) {
+                            for (int x = tx * kTilePx; x < x_end; ++x) {
+                              const Eigen::Vector2d c(xs[x - tx * kTilePx], ys[y - ty * kTilePx]);
+                              const At at{tables.data(), x - tx * kTilePx, y - ty * kTilePx};
+                              J X(c.x(), 0), Y(c.y(), 1);
+                              uint8_t region = model.regions(c.x(), c.y(), region_sites, at);
+                              J paint(0.0);
+                              for (int i : strokes) {
+                                const Stroke& s = model.strokes[static_cast<size_t>(i)];
+                                if (!s.bounds.Contains(c.x(), c.y())) continue;
+                                J t = s(X, Y);
+                                paint += t;
+                                if (t.a >= kRegionCoverShare * s.height_mm && t.a > 0)
+                                  region = s.region;
+                              }
+                              for (int i : blobs) {
+                                const Blob& b = model.blobs[static_cast<size_t>(i)];
+                                if (!b.bounds.Contains(c.x(), c.y())) continue;
+                                J t = b(X, Y);
+                                paint += t;
+                                if (t.a >= kRegionCoverShare * b.height_mm && t.a > 0)
+                                  region = b.region;
+                              }
+                              J h = paint;
+                              if (model.weave_on)
+                                h += model.weave(X, Y, at) * exp(-paint / kWeaveBurialMm);
+                              for (size_t k = 0; k < model.cracks.size(); ++k)
+                                h += model.cracks[k](X, Y, crack_sites[k], at);
+                              if (options.bow_mm != 0) {
+                                const J u = 2.0 * X / p.width_mm - 1.0,
+                                        v = 2.0 * Y / p.height_mm - 1.0;
+                                h += options.bow_mm * (1.0 - u * u) * (1.0 - v * v);
+                              }
+                              p.truth.height_mm(x, y) = static_cast<float>(h.a);
+                              Vec3d n(-h.v[0], -h.v[1], 1.0);
+                              p.normals(x, y) = n.normalized().cast<float>();
+                              p.region(x, y) = region;
+                            }
+                          }
+                        }
+                      }
+                    });
   // The bare canvas's plane: least squares of the bow over the texel centres (X', Y' centred, so
   // the normal equations separate: offset = mean, slopes = sum(X' bow) / sum(X'^2)).
   if (options.bow_mm != 0) {

@@ -39,7 +39,8 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
       const Eigen::Vector2d xy = fitted_canvas.TexelCentreMm(x, y);
       const Vec3d p = true_from_fitted.Apply({xy.x(), xy.y(), fitted_canvas.height_mm(x, y)});
       const Eigen::Vector2d t = true_field.TexelFromMm(p.x(), p.y());
-      const int tx = static_cast<int>(std::lround(t.x())), ty = static_cast<int>(std::lround(t.y()));
+      const int tx = static_cast<int>(std::lround(t.x())),
+                ty = static_cast<int>(std::lround(t.y()));
       if (!true_field.height_mm.Contains(tx, ty)) continue;
       const size_t m = truth.material_index(tx, ty);
       if (m >= n_materials) continue;

@@ -91,8 +91,8 @@ Camera MakeCamera(const Painting& painting, const FrameOptions& frame, const Sca
   cam.width = o.width_px;
   cam.height = o.height_px;
   const double scale = 1 + o.field_margin;
-  const Vec3d centre = scan_from_canvas.Apply(
-      Vec3d(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0));
+  const Vec3d centre =
+      scan_from_canvas.Apply(Vec3d(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0));
   double half_x = 0, half_y = 0;
   for (const Vec3d& c : Footprint(painting, frame)) {
     Vec3d p = scan_from_canvas.Apply(c);
@@ -219,25 +219,26 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
   out.hit_scan = Grid<uint8_t>(w, h, 0);
   out.canvas_mask_scan = Grid<uint8_t>(w, h, 0);
   const RigidTransform& cfs = out.canvas_from_scan;
-  tbb::parallel_for(tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
-    std::vector<Vec3d> origins(static_cast<size_t>(w)), directions(static_cast<size_t>(w));
-    std::vector<Scene::RayHit> hits;
-    for (int j = r.begin(); j < r.end(); ++j) {
-      for (int i = 0; i < w; ++i) {
-        Vec3d o, d;
-        cam.Ray(i, j, o, d);
-        origins[static_cast<size_t>(i)] = cfs.Apply(o);
-        directions[static_cast<size_t>(i)] = cfs.ApplyToDirection(d);
-      }
-      scene.Intersect(origins, directions, hits);
-      for (int i = 0; i < w; ++i) {
-        const Scene::RayHit& hit = hits[static_cast<size_t>(i)];
-        out.hit_scan(i, j) = static_cast<uint8_t>(hit.what);
-        out.canvas_mask_scan(i, j) = hit.what == Scene::Hit::kCanvas ? 1 : 0;
-        t_mm(i, j) = static_cast<float>(hit.t);
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
+        std::vector<Vec3d> origins(static_cast<size_t>(w)), directions(static_cast<size_t>(w));
+        std::vector<Scene::RayHit> hits;
+        for (int j = r.begin(); j < r.end(); ++j) {
+          for (int i = 0; i < w; ++i) {
+            Vec3d o, d;
+            cam.Ray(i, j, o, d);
+            origins[static_cast<size_t>(i)] = cfs.Apply(o);
+            directions[static_cast<size_t>(i)] = cfs.ApplyToDirection(d);
+          }
+          scene.Intersect(origins, directions, hits);
+          for (int i = 0; i < w; ++i) {
+            const Scene::RayHit& hit = hits[static_cast<size_t>(i)];
+            out.hit_scan(i, j) = static_cast<uint8_t>(hit.what);
+            out.canvas_mask_scan(i, j) = hit.what == Scene::Hit::kCanvas ? 1 : 0;
+            t_mm(i, j) = static_cast<float>(hit.t);
+          }
+        }
+      });
 
   // Ground truth of the visible canvas: its outline pixels (canvas pixels with a 4-neighbour
   // that is not canvas, or on the scan's border) and its bounding box in the canvas frame.
@@ -267,37 +268,38 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
   out.exposures.resize(static_cast<size_t>(options.exposures));
   for (int e = 0; e < options.exposures; ++e) {
     Scan& scan = out.exposures[static_cast<size_t>(e)];
-    scan.source = "synthetic exposure " + std::to_string(e) + " (seed " +
-                  std::to_string(options.seed) + ")";
+    scan.source =
+        "synthetic exposure " + std::to_string(e) + " (seed " + std::to_string(options.seed) + ")";
     scan.xyz_mm = Grid<Vec3f>(w, h, Vec3f::Constant(kMissing));
     const Grid<uint8_t> holes = HoleMask(options, e, outline);
-    tbb::parallel_for(tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
-      for (int j = r.begin(); j < r.end(); ++j) {
-        std::mt19937_64 rng = RowStream(options.seed, e, 1, j);
-        std::mt19937_64 rare = RowStream(options.seed, e, 2, j);  // outlier sizes
-        std::normal_distribution<double> noise(0.0, 1.0);
-        std::uniform_real_distribution<double> unit(0.0, 1.0);
-        for (int i = 0; i < w; ++i) {
-          // The same draws for every pixel, whatever happens to it, so that the losses asked
-          // for do not shift the noise of the pixels after it. One 64-bit draw gives the two
-          // 32-bit uniforms of the dropout and outlier decisions.
-          const double n = noise(rng);
-          const uint64_t bits = rng();
-          const double drop = static_cast<double>(bits & 0xFFFFFFFFu) * 0x1.0p-32;
-          const double outlier = static_cast<double>(bits >> 32) * 0x1.0p-32;
-          if (out.hit_scan(i, j) == static_cast<uint8_t>(Scene::Hit::kNone)) continue;
-          if (holes(i, j) || drop < options.dropout) continue;
-          double t = t_mm(i, j) + options.noise_mm * n;
-          if (outlier < options.outliers) {
-            double magnitude = kOutlierMinMm + (kOutlierMaxMm - kOutlierMinMm) * unit(rare);
-            t += (outlier < 0.5 * options.outliers) ? magnitude : -magnitude;
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, h, kRowGrain), [&](const tbb::blocked_range<int>& r) {
+          for (int j = r.begin(); j < r.end(); ++j) {
+            std::mt19937_64 rng = RowStream(options.seed, e, 1, j);
+            std::mt19937_64 rare = RowStream(options.seed, e, 2, j);  // outlier sizes
+            std::normal_distribution<double> noise(0.0, 1.0);
+            std::uniform_real_distribution<double> unit(0.0, 1.0);
+            for (int i = 0; i < w; ++i) {
+              // The same draws for every pixel, whatever happens to it, so that the losses asked
+              // for do not shift the noise of the pixels after it. One 64-bit draw gives the two
+              // 32-bit uniforms of the dropout and outlier decisions.
+              const double n = noise(rng);
+              const uint64_t bits = rng();
+              const double drop = static_cast<double>(bits & 0xFFFFFFFFu) * 0x1.0p-32;
+              const double outlier = static_cast<double>(bits >> 32) * 0x1.0p-32;
+              if (out.hit_scan(i, j) == static_cast<uint8_t>(Scene::Hit::kNone)) continue;
+              if (holes(i, j) || drop < options.dropout) continue;
+              double t = t_mm(i, j) + options.noise_mm * n;
+              if (outlier < options.outliers) {
+                double magnitude = kOutlierMinMm + (kOutlierMaxMm - kOutlierMinMm) * unit(rare);
+                t += (outlier < 0.5 * options.outliers) ? magnitude : -magnitude;
+              }
+              Vec3d o, d;
+              cam.Ray(i, j, o, d);
+              scan.xyz_mm(i, j) = (o + t * d).cast<float>();
+            }
           }
-          Vec3d o, d;
-          cam.Ray(i, j, o, d);
-          scan.xyz_mm(i, j) = (o + t * d).cast<float>();
-        }
-      }
-    });
+        });
   }
   return out;
 }
@@ -308,7 +310,8 @@ int MatchedResolution(const PaintingOptions& painting, const FrameOptions& frame
   const double frame_y = frame.enabled ? frame.Width(2) + frame.Width(3) : 0;
   const double field_x = (painting.width_mm + frame_x) * (1 + scan.field_margin);
   const double field_y = (painting.height_mm + frame_y) * (1 + scan.field_margin);
-  const double pitch = std::max(field_x / std::max(scan.width_px, 1), field_y / std::max(scan.height_px, 1));
+  const double pitch =
+      std::max(field_x / std::max(scan.width_px, 1), field_y / std::max(scan.height_px, 1));
   const double long_side = std::max(painting.width_mm, painting.height_mm);
   return std::clamp(static_cast<int>(long_side / (1.1 * pitch)), 64, 8192);
 }

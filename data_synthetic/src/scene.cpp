@@ -25,15 +25,15 @@ constexpr size_t kRayBatch = 256;  // rays per rtcIntersect1M call
 // height as a share of raise_mm). First and last points are replaced by the wall depth: the inner
 // step and the outer face go down to the wall. Sight edge, a cove, a rounded top, a fall outwards.
 constexpr std::array<std::array<double, 2>, 10> kProfile = {{{0.0, 0.0},
-                                                              {0.0, 1.0},
-                                                              {0.10, 1.0},
-                                                              {0.18, 0.86},
-                                                              {0.30, 0.82},
-                                                              {0.45, 0.90},
-                                                              {0.62, 0.98},
-                                                              {0.78, 0.93},
-                                                              {1.0, 0.70},
-                                                              {1.0, 0.0}}};
+                                                             {0.0, 1.0},
+                                                             {0.10, 1.0},
+                                                             {0.18, 0.86},
+                                                             {0.30, 0.82},
+                                                             {0.45, 0.90},
+                                                             {0.62, 0.98},
+                                                             {0.78, 0.93},
+                                                             {1.0, 0.70},
+                                                             {1.0, 0.0}}};
 
 void ErrorCallback(void* user, RTCError code, const char* message) {
   auto* last = static_cast<std::string*>(user);
@@ -140,24 +140,25 @@ struct Scene::Impl {
       if (i == n + 1) return n * pitch_mm;
       return (i - 0.5) * pitch_mm;
     };
-    tbb::parallel_for(tbb::blocked_range<int>(0, ht + 2, 64), [&](const tbb::blocked_range<int>& r) {
-      for (int row = r.begin(); row < r.end(); ++row) {
-        const float y_mm = static_cast<float>(painting.height_mm - coord(row, ht, pitch));
-        const float* src = h.Row(std::clamp(row - 1, 0, ht - 1));
-        float* dst = v + 3 * static_cast<size_t>(row) * stride;
-        for (int c = 0; c < w + 2; ++c) {
-          dst[3 * c + 0] = static_cast<float>(coord(c, w, pitch));
-          dst[3 * c + 1] = y_mm;
-          dst[3 * c + 2] = src[std::clamp(c - 1, 0, w - 1)];
-        }
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, ht + 2, 64), [&](const tbb::blocked_range<int>& r) {
+          for (int row = r.begin(); row < r.end(); ++row) {
+            const float y_mm = static_cast<float>(painting.height_mm - coord(row, ht, pitch));
+            const float* src = h.Row(std::clamp(row - 1, 0, ht - 1));
+            float* dst = v + 3 * static_cast<size_t>(row) * stride;
+            for (int c = 0; c < w + 2; ++c) {
+              dst[3 * c + 0] = static_cast<float>(coord(c, w, pitch));
+              dst[3 * c + 1] = y_mm;
+              dst[3 * c + 2] = src[std::clamp(c - 1, 0, w - 1)];
+            }
+          }
+        });
     const int cells_x = w + 1, cells_y = ht + 1;
     const int tiles_x = (cells_x + kGridCells - 1) / kGridCells;
     const int tiles_y = (cells_y + kGridCells - 1) / kGridCells;
-    auto* grids = static_cast<RTCGrid*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid),
-        static_cast<size_t>(tiles_x) * tiles_y));
+    auto* grids = static_cast<RTCGrid*>(
+        rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_GRID, 0, RTC_FORMAT_GRID, sizeof(RTCGrid),
+                                static_cast<size_t>(tiles_x) * tiles_y));
     Check("canvas grid buffer");
     for (int ty = 0; ty < tiles_y; ++ty) {
       for (int tx = 0; tx < tiles_x; ++tx) {
@@ -243,7 +244,8 @@ struct Scene::Impl {
     float top = 0;
     for (int x = 0; x < h.width; ++x) top = std::min({top, h(x, 0), h(x, h.height - 1)});
     for (int y = 0; y < h.height; ++y) top = std::min({top, h(0, y), h(h.width - 1, y)});
-    const float W = static_cast<float>(painting.width_mm), H = static_cast<float>(painting.height_mm);
+    const float W = static_cast<float>(painting.width_mm),
+                H = static_cast<float>(painting.height_mm);
     const float bottom = static_cast<float>(-frame.wall_depth_mm);
     std::vector<Eigen::Vector3f> vertices = {{0, 0, bottom}, {W, 0, bottom}, {W, H, bottom},
                                              {0, H, bottom}, {0, 0, top},    {W, 0, top},
@@ -260,10 +262,13 @@ struct Scene::Impl {
   void AddWall(const Painting& painting, const FrameOptions& frame) {
     // Far larger than any field of view a scan of this scene can have, small enough for float.
     const float reach = static_cast<float>(20 * (painting.width_mm + painting.height_mm) + 1e4);
-    const float W = static_cast<float>(painting.width_mm), H = static_cast<float>(painting.height_mm);
+    const float W = static_cast<float>(painting.width_mm),
+                H = static_cast<float>(painting.height_mm);
     const float z = static_cast<float>(-frame.wall_depth_mm);
-    std::vector<Eigen::Vector3f> vertices = {
-        {-reach, -reach, z}, {W + reach, -reach, z}, {W + reach, H + reach, z}, {-reach, H + reach, z}};
+    std::vector<Eigen::Vector3f> vertices = {{-reach, -reach, z},
+                                             {W + reach, -reach, z},
+                                             {W + reach, H + reach, z},
+                                             {-reach, H + reach, z}};
     AddTriangles(vertices, {{0, 1, 2}, {0, 2, 3}}, Hit::kWall);
   }
 };
@@ -336,36 +341,37 @@ void Scene::IntersectImpl(const std::vector<Vec3d>& origins, const std::vector<V
   const size_t n = origins.size();
   const size_t batches = (n + kRayBatch - 1) / kRayBatch;
   constexpr float kInf = std::numeric_limits<float>::infinity();
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
-    std::array<RTCRayHit, kRayBatch> rays;
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    for (size_t batch = r.begin(); batch < r.end(); ++batch) {
-      const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
-      for (size_t k = 0; k < count; ++k) {
-        RTCRayHit& ray = rays[k];
-        SetRay(ray.ray, origins[first + k], directions[first + k],
-               max_t_mm ? (*max_t_mm)[first + k] : kInf, static_cast<unsigned>(k));
-        ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-      }
-      rtcIntersect1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
-                     sizeof(RTCRayHit));
-      for (size_t k = 0; k < count; ++k) {
-        const RTCRayHit& ray = rays[k];
-        RayHit& out = hits[first + k];
-        if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-        out.what = impl_->kind_of_geometry[ray.hit.geomID];
-        out.t = ray.ray.tfar;
-        Vec3d normal(ray.hit.Ng_x, ray.hit.Ng_y, ray.hit.Ng_z);
-        Vec3d dir(ray.ray.dir_x, ray.ray.dir_y, ray.ray.dir_z);
-        normal.normalize();
-        if (normal.dot(dir) > 0) normal = -normal;
-        out.normal = normal;
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
+        std::array<RTCRayHit, kRayBatch> rays;
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        for (size_t batch = r.begin(); batch < r.end(); ++batch) {
+          const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
+          for (size_t k = 0; k < count; ++k) {
+            RTCRayHit& ray = rays[k];
+            SetRay(ray.ray, origins[first + k], directions[first + k],
+                   max_t_mm ? (*max_t_mm)[first + k] : kInf, static_cast<unsigned>(k));
+            ray.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+            ray.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+          }
+          rtcIntersect1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
+                         sizeof(RTCRayHit));
+          for (size_t k = 0; k < count; ++k) {
+            const RTCRayHit& ray = rays[k];
+            RayHit& out = hits[first + k];
+            if (ray.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+            out.what = impl_->kind_of_geometry[ray.hit.geomID];
+            out.t = ray.ray.tfar;
+            Vec3d normal(ray.hit.Ng_x, ray.hit.Ng_y, ray.hit.Ng_z);
+            Vec3d dir(ray.ray.dir_x, ray.ray.dir_y, ray.ray.dir_z);
+            normal.normalize();
+            if (normal.dot(dir) > 0) normal = -normal;
+            out.normal = normal;
+          }
+        }
+      });
 }
 
 void Scene::Occluded(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
@@ -375,25 +381,26 @@ void Scene::Occluded(const std::vector<Vec3d>& origins, const std::vector<Vec3d>
   const size_t n = origins.size();
   blocked.assign(n, 0);
   const size_t batches = (n + kRayBatch - 1) / kRayBatch;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
-    std::array<RTCRay, kRayBatch> rays;
-    RTCIntersectContext context;
-    rtcInitIntersectContext(&context);
-    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    for (size_t batch = r.begin(); batch < r.end(); ++batch) {
-      const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
-      for (size_t k = 0; k < count; ++k) {
-        SetRay(rays[k], origins[first + k], directions[first + k], max_t_mm[first + k],
-               static_cast<unsigned>(k));
-      }
-      rtcOccluded1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
-                    sizeof(RTCRay));
-      // Embree marks a blocked ray by setting tfar to -inf; an empty ray keeps its tfar of -1.
-      for (size_t k = 0; k < count; ++k) {
-        blocked[first + k] = rays[k].tfar == -std::numeric_limits<float>::infinity() ? 1 : 0;
-      }
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, batches), [&](const tbb::blocked_range<size_t>& r) {
+        std::array<RTCRay, kRayBatch> rays;
+        RTCIntersectContext context;
+        rtcInitIntersectContext(&context);
+        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+        for (size_t batch = r.begin(); batch < r.end(); ++batch) {
+          const size_t first = batch * kRayBatch, count = std::min(kRayBatch, n - first);
+          for (size_t k = 0; k < count; ++k) {
+            SetRay(rays[k], origins[first + k], directions[first + k], max_t_mm[first + k],
+                   static_cast<unsigned>(k));
+          }
+          rtcOccluded1M(impl_->scene, &context, rays.data(), static_cast<unsigned>(count),
+                        sizeof(RTCRay));
+          // Embree marks a blocked ray by setting tfar to -inf; an empty ray keeps its tfar of -1.
+          for (size_t k = 0; k < count; ++k) {
+            blocked[first + k] = rays[k].tfar == -std::numeric_limits<float>::infinity() ? 1 : 0;
+          }
+        }
+      });
 }
 
 }  // namespace digitize::synth

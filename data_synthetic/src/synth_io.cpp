@@ -1,9 +1,8 @@
 // Synthetic scan + ground truth on disk (synth_io.h).
 #include "digitize_synth/synth_io.h"
 
-#include <nlohmann/json.hpp>
-
 #include <algorithm>
+#include <nlohmann/json.hpp>
 #include <system_error>
 
 #include "digitize/image_io.h"
@@ -103,7 +102,8 @@ std::string SyntheticTruthJson(const Painting& painting, const SyntheticScan& sc
   size_t canvas_px = 0;
   for (uint8_t m : scan.canvas_mask_scan.data) canvas_px += m != 0;
   float max_h = 0, min_h = 0;
-  for (float h : painting.truth.height_mm.data) max_h = std::max(max_h, h), min_h = std::min(min_h, h);
+  for (float h : painting.truth.height_mm.data)
+    max_h = std::max(max_h, h), min_h = std::min(min_h, h);
   json j = {
       {"format", "digitize.synthetic_truth"},
       {"version", kTruthFormatVersion},
@@ -167,19 +167,21 @@ Status WriteSyntheticScan(const std::filesystem::path& dir, const Painting& pain
     Status s = WriteScanExr(dir / names[e], scan.exposures[e]);
     if (!s.ok()) return s;
   }
-  const ImageMetadata canvas_meta = {{"digitize:frame", "canvas"},
-                                     {"digitize:units", "mm"},
-                                     {"digitize:pitch_mm", std::to_string(painting.truth.pitch_mm)}};
+  const ImageMetadata canvas_meta = {
+      {"digitize:frame", "canvas"},
+      {"digitize:units", "mm"},
+      {"digitize:pitch_mm", std::to_string(painting.truth.pitch_mm)}};
   ImageMetadata height_meta = canvas_meta;
   height_meta["digitize:quantity"] = "height";
-  if (Status s = WriteFloatExr(dir / "truth_height.exr", painting.truth.height_mm, "Y", height_meta);
+  if (Status s =
+          WriteFloatExr(dir / "truth_height.exr", painting.truth.height_mm, "Y", height_meta);
       !s.ok())
     return s;
   ImageMetadata normal_meta = canvas_meta;
   normal_meta["digitize:quantity"] = "normal";
   normal_meta["digitize:units"] = "unit vector";
-  if (Status s = WriteFloatExr(dir / "truth_normals.exr", painting.normals, {"X", "Y", "Z"},
-                               normal_meta);
+  if (Status s =
+          WriteFloatExr(dir / "truth_normals.exr", painting.normals, {"X", "Y", "Z"}, normal_meta);
       !s.ok())
     return s;
   if (Status s = WritePng8(dir / "truth_regions.png", painting.region); !s.ok()) return s;

@@ -22,12 +22,30 @@ inline size_t FixedAttributeSize(std::string_view type) {
     size_t bytes;
   };
   static constexpr Entry kFixed[] = {
-      {"int", 4},         {"float", 4},           {"double", 8},         {"compression", 1},
-      {"lineOrder", 1},   {"envmap", 1},          {"deepImageState", 1}, {"box2i", 16},
-      {"box2f", 16},      {"v2i", 8},             {"v2f", 8},            {"v2d", 16},
-      {"v3i", 12},        {"v3f", 12},            {"v3d", 24},           {"m33f", 36},
-      {"m33d", 72},       {"m44f", 64},           {"m44d", 128},         {"rational", 8},
-      {"timecode", 8},    {"keycode", 28},        {"chromaticities", 32}, {"tiledesc", 9},
+      {"int", 4},
+      {"float", 4},
+      {"double", 8},
+      {"compression", 1},
+      {"lineOrder", 1},
+      {"envmap", 1},
+      {"deepImageState", 1},
+      {"box2i", 16},
+      {"box2f", 16},
+      {"v2i", 8},
+      {"v2f", 8},
+      {"v2d", 16},
+      {"v3i", 12},
+      {"v3f", 12},
+      {"v3d", 24},
+      {"m33f", 36},
+      {"m33d", 72},
+      {"m44f", 64},
+      {"m44d", 128},
+      {"rational", 8},
+      {"timecode", 8},
+      {"keycode", 28},
+      {"chromaticities", 32},
+      {"tiledesc", 9},
   };
   for (const Entry& e : kFixed)
     if (e.type == type) return e.bytes;

@@ -32,7 +32,6 @@ namespace fs = std::filesystem;
 static_assert(sizeof(Vec3f) == 3 * sizeof(float), "Grid<Vec3f> must be interleaved floats");
 static_assert(sizeof(std::array<uint8_t, 3>) == 3, "Grid<RGB8> must be interleaved bytes");
 
-
 // "name.exr" -> ".name.exr.tmp-<pid>-<n>.exr": hidden, unique per process and call, and still
 // ending in the real extension for any writer that picks the format from the name.
 fs::path TempPathFor(const fs::path& path) {

@@ -38,7 +38,8 @@ Status LafortuneParams::Validate() const {
   if (!std::isfinite(cx) || !std::isfinite(cy))
     return Error{"cx, cy must be finite, got " + FormatNumber(cx) + ", " + FormatNumber(cy)};
   if (cz != 1.0f) return Error{"cz must be 1 (the stored gauge), got " + FormatNumber(cz)};
-  if (!(std::isfinite(k) && k >= 0.0f)) return Error{"k must be finite and >= 0, got " + FormatNumber(k)};
+  if (!(std::isfinite(k) && k >= 0.0f))
+    return Error{"k must be finite and >= 0, got " + FormatNumber(k)};
   return Status::Ok();
 }
 
@@ -79,8 +80,8 @@ Result<LafortuneParams> LafortuneFromGeneral(const Vec3f& rho_d, const Vec3f& rh
   if (!FiniteNonNegative(rho_s))
     return Error{"general Lafortune lobe: rho_s must be finite and >= 0"};
   if (!(std::isfinite(cx) && std::isfinite(cy) && std::isfinite(cz)))
-    return Error{"general Lafortune lobe: C must be finite, got (" + FormatNumber(cx) + ", " + FormatNumber(cy) +
-                 ", " + FormatNumber(cz) + ")"};
+    return Error{"general Lafortune lobe: C must be finite, got (" + FormatNumber(cx) + ", " +
+                 FormatNumber(cy) + ", " + FormatNumber(cz) + ")"};
   if (!(std::isfinite(k) && k >= 0.0))
     return Error{"general Lafortune lobe: k must be finite and >= 0, got " + FormatNumber(k)};
   if (!(cz > 0.0))
@@ -212,7 +213,8 @@ Result<std::vector<MeasuredLafortune>> ParseMeasuredLafortuneFits(std::string_vi
         if (!ParseNumber(tokens[2 + c], &value))
           return fail("diffuse of " + name + ": '" + std::string(tokens[2 + c]) +
                       "' is not a finite number");
-        if (value < 0.0f) return fail("diffuse of " + name + ": albedo " + FormatNumber(value) + " < 0");
+        if (value < 0.0f)
+          return fail("diffuse of " + name + ": albedo " + FormatNumber(value) + " < 0");
         albedo[c] = value;
       }
       it->diffuse_albedo = albedo;

@@ -126,7 +126,8 @@ const char* ToString(PackEncoding encoding) {
 
 Status PackQuantisation::Validate() const {
   for (auto [name, v] : {std::pair<const char*, int>{"height_bits", height_bits},
-                         {"normal_bits", normal_bits}, {"rho_bits", rho_bits},
+                         {"normal_bits", normal_bits},
+                         {"rho_bits", rho_bits},
                          {"lobe_bits", lobe_bits}})
     if (v < 0 || v > 10)
       return Error{std::string(name) + " must be in [0, 10] (half mantissa bits), got " +
@@ -167,7 +168,8 @@ Status Pack::Validate() const {
         return Error{"pack: texel state at " + TexelName(x, y) + " is not a TexelState"};
       const Vec3f& n = normals(x, y);
       if (!IsValid(n) || std::abs(n.norm() - 1.0f) > 1e-3f || n.z() < 0)
-        return Error{"pack: normal at texel " + TexelName(x, y) + " is not a unit vector with nz >= 0"};
+        return Error{"pack: normal at texel " + TexelName(x, y) +
+                     " is not a unit vector with nz >= 0"};
     }
   if (cell_px < 1) return Error{"pack: cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!boxes.empty() && !(delta0_mm > 0))
@@ -177,9 +179,10 @@ Status Pack::Validate() const {
     const std::string name = "pack: box " + std::to_string(i);
     if (b.x0 < 0 || b.y0 < 0 || b.width < 1 || b.height < 1 || b.x0 + int64_t{b.width} > w ||
         b.y0 + int64_t{b.height} > h)
-      return Error{name + " is not inside the " + std::to_string(w) + "x" + std::to_string(h) + " grid"};
-    if (b.x0 % cell_px != 0 || b.y0 % cell_px != 0 ||
-        b.width != std::min(cell_px, w - b.x0) || b.height != std::min(cell_px, h - b.y0))
+      return Error{name + " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
+                   " grid"};
+    if (b.x0 % cell_px != 0 || b.y0 % cell_px != 0 || b.width != std::min(cell_px, w - b.x0) ||
+        b.height != std::min(cell_px, h - b.y0))
       return Error{name + " is not a cell of the " + std::to_string(cell_px) + "-texel grid"};
     if (b.u_max < b.x0 || b.u_max >= b.x0 + b.width || b.v_max < b.y0 || b.v_max >= b.y0 + b.height)
       return Error{name + ": its highest texel (u_max, v_max) lies outside the box"};
@@ -203,7 +206,8 @@ Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options) {
   for (size_t i = 0; i < pack.field.height_mm.size(); ++i) {
     out.field.height_mm.data[i] = Encode(pack.field.height_mm.data[i], bits.height_bits);
     const Vec3f& n = pack.normals.data[i];
-    out.normals.data[i] = NormalFromXY(Encode(n.x(), bits.normal_bits), Encode(n.y(), bits.normal_bits));
+    out.normals.data[i] =
+        NormalFromXY(Encode(n.x(), bits.normal_bits), Encode(n.y(), bits.normal_bits));
     for (int c = 0; c < 3; ++c) {
       out.maps.rho_d.data[i][c] = Encode(pack.maps.rho_d.data[i][c], bits.rho_bits);
       out.maps.rho_s.data[i][c] = Encode(pack.maps.rho_s.data[i][c], bits.rho_bits);
@@ -215,12 +219,13 @@ Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options) {
   return out;
 }
 
-Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps, PackProvenance provenance) {
+Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps,
+                          PackProvenance provenance) {
   if (maps.width() != canvas.field.width() || maps.height() != canvas.field.height())
     return Error{"reflectance maps are " + std::to_string(maps.width()) + "x" +
                  std::to_string(maps.height()) + " texels, the canvas " +
-                 std::to_string(canvas.field.width()) + "x" + std::to_string(canvas.field.height()) +
-                 ": fitted on another canvas?"};
+                 std::to_string(canvas.field.width()) + "x" +
+                 std::to_string(canvas.field.height()) + ": fitted on another canvas?"};
   Pack pack;
   pack.field = std::move(canvas.field);
   pack.normals = std::move(canvas.normals);

@@ -143,8 +143,8 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
       canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
   if (!fit.ok()) return fit.error();
   if (held) {
-    auto score = EvaluateHeldOut(canvas->field, canvas->normals, fit->maps,
-                                 canvas->canvas_from_scan, *held);
+    auto score =
+        EvaluateHeldOut(canvas->field, canvas->normals, fit->maps, canvas->canvas_from_scan, *held);
     if (!score.ok()) return score.error();
     result.held_out = *score;
   }

@@ -54,8 +54,7 @@ Status PreprocessOptions::Validate() const {
   return Status::Ok();
 }
 
-Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
-                                    const PreprocessOptions& options,
+Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const PreprocessOptions& options,
                                     const ProgressCallback& progress) {
   if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
   if (exposures.empty()) return Error{"preprocess: no scan given"};
@@ -79,7 +78,8 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
     scan = std::move(merged).value();
   }
   step("merge", t0,
-       Format("merge: %d exposure(s) of %dx%d, %zu samples filled from other exposures, %zu disagreeing",
+       Format("merge: %d exposure(s) of %dx%d, %zu samples filled from other exposures, %zu "
+              "disagreeing",
               result.merge.exposures, scan.xyz_mm.width, scan.xyz_mm.height,
               result.merge.filled_from_others, result.merge.disagreeing));
 
@@ -88,9 +88,10 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   result.sanitize = SanitizeScan(scan, options.sanitize);
   const SanitizeStats& ss = result.sanitize;
   step("sanitize", t0,
-       Format("sanitize: %zu of %zu samples valid (%.1f %%); %zu missing, %zu non-finite or absurd, "
-              "%zu isolated spikes removed",
-              ss.valid, ss.total, Percent(ss.valid, ss.total), ss.missing, ss.non_finite, ss.spikes));
+       Format(
+           "sanitize: %zu of %zu samples valid (%.1f %%); %zu missing, %zu non-finite or absurd, "
+           "%zu isolated spikes removed",
+           ss.valid, ss.total, Percent(ss.valid, ss.total), ss.missing, ss.non_finite, ss.spikes));
 
   t0 = Clock::now();
   ReportProgress(progress, "canvas", 2.0 / kSteps);
@@ -116,7 +117,8 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
 
   t0 = Clock::now();
   ReportProgress(progress, "resample", 3.0 / kSteps);
-  Result<HeightField> field = ResampleToCanvasGrid(scan, result.canvas, options.resample, &result.resample);
+  Result<HeightField> field =
+      ResampleToCanvasGrid(scan, result.canvas, options.resample, &result.resample);
   if (!field.ok()) return field.error();
   result.field = std::move(field).value();
   const ResampleStats& rs = result.resample;
@@ -147,8 +149,9 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
   t0 = Clock::now();
   ReportProgress(progress, "normals", 5.0 / kSteps);
   result.normals = ComputeNormals(result.field);
-  step("normals", t0, Format("normals: %dx%d from 8-neighbourhood triangles", result.normals.width,
-                             result.normals.height));
+  step("normals", t0,
+       Format("normals: %dx%d from 8-neighbourhood triangles", result.normals.width,
+              result.normals.height));
   ReportProgress(progress, "done", 1.0);
 
   // The contract is "no NaN/Inf ever leaves a stage": a violation is a bug, not bad input.
@@ -259,21 +262,31 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
                               {"digitize:version", DIGITIZE_VERSION}};
   ImageMetadata height_meta = meta;
   height_meta["digitize:quantity"] = "height_mm";
-  if (Status s = WriteFloatExr(dir / "height.exr", f.height_mm, "Y", height_meta); !s.ok()) return s;
+  if (Status s = WriteFloatExr(dir / "height.exr", f.height_mm, "Y", height_meta); !s.ok())
+    return s;
 
   ImageMetadata normal_meta = meta;
   normal_meta["digitize:quantity"] = "unit normal (nx, ny, nz) in R, G, B";
-  if (Status s = WriteFloatExr(dir / "normals.exr", result.normals, {"R", "G", "B"}, normal_meta); !s.ok())
+  if (Status s = WriteFloatExr(dir / "normals.exr", result.normals, {"R", "G", "B"}, normal_meta);
+      !s.ok())
     return s;
 
   // Mask values are spread over 0..255 so the PNG is readable by eye (docs/formats.md).
   Grid<uint8_t> mask(f.width(), f.height());
   for (size_t i = 0; i < mask.size(); ++i) {
     switch (f.state.data[i]) {
-      case TexelState::kOutside: mask.data[i] = 0; break;
-      case TexelState::kUnfilled: mask.data[i] = 85; break;
-      case TexelState::kFilled: mask.data[i] = 170; break;
-      case TexelState::kMeasured: mask.data[i] = 255; break;
+      case TexelState::kOutside:
+        mask.data[i] = 0;
+        break;
+      case TexelState::kUnfilled:
+        mask.data[i] = 85;
+        break;
+      case TexelState::kFilled:
+        mask.data[i] = 170;
+        break;
+      case TexelState::kMeasured:
+        mask.data[i] = 255;
+        break;
     }
   }
   if (Status s = WritePng8(dir / "mask.png", mask); !s.ok()) return s;
@@ -285,8 +298,13 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   using nlohmann::json;
   json boxes = json::array();
   for (const ReliefBox& b : result.relief.boxes)
-    boxes.push_back({{"x0", b.x0}, {"y0", b.y0}, {"width", b.width}, {"height", b.height},
-                     {"h_max_mm", b.h_max_mm}, {"u_max", b.u_max}, {"v_max", b.v_max}});
+    boxes.push_back({{"x0", b.x0},
+                     {"y0", b.y0},
+                     {"width", b.width},
+                     {"height", b.height},
+                     {"h_max_mm", b.h_max_mm},
+                     {"u_max", b.u_max},
+                     {"v_max", b.v_max}});
   json boxes_doc = {{"format", "digitize.boxes"},
                     {"version", 1},
                     {"units", "texels; heights in mm"},
@@ -404,14 +422,16 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
   const auto mask_path = dir / "mask.png";
   auto mask = ReadImage(mask_path);
   if (!mask.ok()) return mask.error();
-  if (mask->width != w || mask->height != h) return size_error(mask_path, mask->width, mask->height);
+  if (mask->width != w || mask->height != h)
+    return size_error(mask_path, mask->width, mask->height);
   if (mask->channels != 1) return Error{mask_path.string() + ": expected a 1-channel mask"};
   const auto normals_path = dir / "normals.exr";
   auto normals = ReadImage(normals_path);
   if (!normals.ok()) return normals.error();
   if (normals->width != w || normals->height != h)
     return size_error(normals_path, normals->width, normals->height);
-  if (normals->channels != 3) return Error{normals_path.string() + ": expected 3 channels (nx, ny, nz)"};
+  if (normals->channels != 3)
+    return Error{normals_path.string() + ": expected 3 channels (nx, ny, nz)"};
 
   out.field.height_mm = Grid<float>(w, h);
   out.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
@@ -424,10 +444,18 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
     out.field.height_mm.data[i] = z;
     const int code = static_cast<int>(std::lround(mask->pixels[i] * 255.0f));
     switch (code) {
-      case 0: out.field.state.data[i] = TexelState::kOutside; break;
-      case 85: out.field.state.data[i] = TexelState::kUnfilled; break;
-      case 170: out.field.state.data[i] = TexelState::kFilled; break;
-      case 255: out.field.state.data[i] = TexelState::kMeasured; break;
+      case 0:
+        out.field.state.data[i] = TexelState::kOutside;
+        break;
+      case 85:
+        out.field.state.data[i] = TexelState::kUnfilled;
+        break;
+      case 170:
+        out.field.state.data[i] = TexelState::kFilled;
+        break;
+      case 255:
+        out.field.state.data[i] = TexelState::kMeasured;
+        break;
       default:
         return Error{mask_path.string() + ": value " + std::to_string(code) + " at texel " +
                      std::to_string(i % w) + ", " + std::to_string(i / w) +

@@ -139,8 +139,10 @@ Status ReflectanceFitOptions::Validate() const {
                  FormatNumber(dark_outlier_ratio)};
   if (!(std::isfinite(dark_outlier_sigmas) && dark_outlier_sigmas >= 0))
     return Error{"dark_outlier_sigmas must be >= 0, got " + FormatNumber(dark_outlier_sigmas)};
-  if (!(std::isfinite(dark_outlier_fit_ratio) && dark_outlier_fit_ratio >= 0 && dark_outlier_fit_ratio < 1))
-    return Error{"dark_outlier_fit_ratio must be in [0, 1), got " + FormatNumber(dark_outlier_fit_ratio)};
+  if (!(std::isfinite(dark_outlier_fit_ratio) && dark_outlier_fit_ratio >= 0 &&
+        dark_outlier_fit_ratio < 1))
+    return Error{"dark_outlier_fit_ratio must be in [0, 1), got " +
+                 FormatNumber(dark_outlier_fit_ratio)};
   if (dark_outlier_rounds < 0 || dark_outlier_rounds > 10)
     return Error{"dark_outlier_rounds must be in [0, 10], got " +
                  std::to_string(dark_outlier_rounds)};
@@ -150,8 +152,7 @@ Status ReflectanceFitOptions::Validate() const {
 std::string ReflectanceFitReport::Brief() const {
   const double mtexels = static_cast<double>(fit.texels) / 1e6;
   std::string photos;
-  if (samples.texels > 0)
-    photos = Format(" x %zu photos", samples.candidates / samples.texels);
+  if (samples.texels > 0) photos = Format(" x %zu photos", samples.candidates / samples.texels);
   BrdfFitSummary s = fit;
   s.seconds = seconds_total;
   return Format("%.3g M texels%s: ", mtexels, photos.c_str()) + s.BriefReport() +
@@ -310,7 +311,8 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
   for (int i = 0; i < kTexelFitStatusCount; ++i)
     status[ToString(static_cast<TexelFitStatus>(i))] = r.fit.count_by_status[i];
   auto rays = [](const TraceStats& t) {
-    return json{{"rays", t.rays}, {"skipped", t.skipped}, {"traced", t.traced}, {"blocked", t.blocked}};
+    return json{
+        {"rays", t.rays}, {"skipped", t.skipped}, {"traced", t.traced}, {"blocked", t.blocked}};
   };
   json doc = {{"format", "digitize.fit_report"},
               {"version", 1},
@@ -418,8 +420,9 @@ Result<std::vector<float>> ReadChannels(const std::filesystem::path& path,
   std::vector<int> order(names.size());
   for (size_t c = 0; c < names.size(); ++c) {
     const auto it = std::find(image->channel_names.begin(), image->channel_names.end(), names[c]);
-    order[c] = it == image->channel_names.end() ? static_cast<int>(c)
-                                                : static_cast<int>(it - image->channel_names.begin());
+    order[c] = it == image->channel_names.end()
+                   ? static_cast<int>(c)
+                   : static_cast<int>(it - image->channel_names.begin());
   }
   const size_t n = static_cast<size_t>(width) * static_cast<size_t>(height);
   std::vector<float> out(n * names.size());
@@ -479,7 +482,8 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
                                      const PhotoSet& held_out,
                                      const std::vector<Grid<uint8_t>>& masks, double peak) {
   const auto start = Clock::now();
-  if (!(std::isfinite(peak) && peak > 0)) return Error{"peak must be > 0, got " + FormatNumber(peak)};
+  if (!(std::isfinite(peak) && peak > 0))
+    return Error{"peak must be > 0, got " + FormatNumber(peak)};
   if (!masks.empty() && masks.size() != held_out.photos.size())
     return Error{"held-out: " + std::to_string(masks.size()) + " masks for " +
                  std::to_string(held_out.photos.size()) + " photos"};
@@ -493,9 +497,10 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
   double sse = 0;
   for (size_t i = 0; i < held_out.photos.size(); ++i) {
     const Photo& photo = held_out.photos[i];
-    if (!photo.loaded()) return Error{photo.entry + ": " + photo.path.string() + ": pixels not loaded"};
-    const RelitImage relit = RenderRelit(*tracer, canvas, normals, maps, canvas_from_scan,
-                                         photo.camera, photo.light);
+    if (!photo.loaded())
+      return Error{photo.entry + ": " + photo.path.string() + ": pixels not loaded"};
+    const RelitImage relit =
+        RenderRelit(*tracer, canvas, normals, maps, canvas_from_scan, photo.camera, photo.light);
     Grid<uint8_t> mask = relit.mask;
     if (!masks.empty()) {
       if (masks[i].width != mask.width || masks[i].height != mask.height)
@@ -517,8 +522,8 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
   if (score.pixels > 0) {
     const double mse = sse / (3.0 * static_cast<double>(score.pixels));
     score.rmse = std::sqrt(mse);
-    score.psnr_db = mse > 0 ? 10.0 * std::log10(peak * peak / mse)
-                            : std::numeric_limits<double>::infinity();
+    score.psnr_db =
+        mse > 0 ? 10.0 * std::log10(peak * peak / mse) : std::numeric_limits<double>::infinity();
   }
   score.seconds = Since(start);
   return score;

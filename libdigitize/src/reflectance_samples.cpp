@@ -84,15 +84,17 @@ SampleStats& SampleStats::operator+=(const SampleStats& o) {
 std::string SampleStats::Brief() const {
   std::string out = Count(candidates) + " candidates, " + Count(kept) + " kept";
   char b[64];
-  std::snprintf(b, sizeof b, " (%.1f %%)",
-                candidates ? 100.0 * static_cast<double>(kept) / static_cast<double>(candidates) : 0.0);
+  std::snprintf(
+      b, sizeof b, " (%.1f %%)",
+      candidates ? 100.0 * static_cast<double>(kept) / static_cast<double>(candidates) : 0.0);
   out += b;
   std::string rejected;
   for (const auto& [n, what] :
        {std::pair{behind_camera, "behind camera"}, std::pair{outside_image, "outside image"},
-        std::pair{facing_away, "facing away"}, std::pair{light_below_horizon, "light below horizon"},
-        std::pair{non_finite, "NaN/Inf"}, std::pair{saturated, "saturated"},
-        std::pair{black, "black"}, std::pair{hidden, "hidden"}, std::pair{shadowed, "shadowed"}}) {
+        std::pair{facing_away, "facing away"},
+        std::pair{light_below_horizon, "light below horizon"}, std::pair{non_finite, "NaN/Inf"},
+        std::pair{saturated, "saturated"}, std::pair{black, "black"}, std::pair{hidden, "hidden"},
+        std::pair{shadowed, "shadowed"}}) {
     if (n == 0) continue;
     rejected += (rejected.empty() ? "" : ", ") + Count(n) + " " + what;
   }

@@ -46,10 +46,12 @@ Status ReliefOptions::Validate() const {
                  FormatNumber(min_component_area_mm2)};
   if (cell_px < 1) return Error{"cell_px must be >= 1, got " + std::to_string(cell_px)};
   if (!(std::isfinite(noise_margin_mm) && noise_margin_mm >= 0.0))
-    return Error{"noise_margin_mm must be a finite height >= 0 mm, got " + FormatNumber(noise_margin_mm)};
+    return Error{"noise_margin_mm must be a finite height >= 0 mm, got " +
+                 FormatNumber(noise_margin_mm)};
   if (cover_px < 0) return Error{"cover_px must be >= 0 texels, got " + std::to_string(cover_px)};
   if (!(std::isfinite(min_relief_mm) && min_relief_mm >= 0.0))
-    return Error{"min_relief_mm must be a finite height >= 0 mm, got " + FormatNumber(min_relief_mm)};
+    return Error{"min_relief_mm must be a finite height >= 0 mm, got " +
+                 FormatNumber(min_relief_mm)};
   return Status::Ok();
 }
 
@@ -60,8 +62,9 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
   DIGITIZE_CHECK(field.state.width == w && field.state.height == h &&
                      field.state.size() == field.height_mm.size(),
                  "ClassifyRelief: state and height grids differ in size");
-  DIGITIZE_CHECK(w == 0 || h == 0 || (std::isfinite(field.pitch_mm) && field.pitch_mm > 0),
-                 "ClassifyRelief: pitch_mm must be finite and > 0, got " + FormatNumber(field.pitch_mm));
+  DIGITIZE_CHECK(
+      w == 0 || h == 0 || (std::isfinite(field.pitch_mm) && field.pitch_mm > 0),
+      "ClassifyRelief: pitch_mm must be finite and > 0, got " + FormatNumber(field.pitch_mm));
 
   const int n = options.cell_px;
   ReliefResult result;
@@ -96,7 +99,8 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
   result.delta0_mm = options.delta0_fraction * max_h;
   // The margin never takes more than half of delta0: it widens Mv near the threshold, it must not
   // turn the whole canvas into relief when the noise is large against the relief.
-  const double threshold = result.delta0_mm - std::min(options.noise_margin_mm, 0.5 * result.delta0_mm);
+  const double threshold =
+      result.delta0_mm - std::min(options.noise_margin_mm, 0.5 * result.delta0_mm);
 
   // --- 2. Mv, and the highest texel (among texels with height) of every cell. Parallel over
   // cell rows so each band owns its cells' peaks.

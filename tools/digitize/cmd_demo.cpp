@@ -30,7 +30,7 @@ struct DemoArgs {
   bool no_fit = false;
   ReflectanceFitOptions fit;
   std::string fit_method = "fast";  // as `fit --method`
-  PackWriteOptions quantised;  // the second, smaller pack (encoding set to kQuantised)
+  PackWriteOptions quantised;       // the second, smaller pack (encoding set to kQuantised)
 };
 
 // A pack as the demo reports it: read back from the file, relit on the held-out photos.
@@ -48,8 +48,9 @@ int RunDemo(const DemoArgs& args) {
   scan_options.seed = args.seed;
   synth::PaintingOptions painting_options;
   painting_options.resolution_px =
-      args.resolution > 0 ? args.resolution
-                          : synth::MatchedResolution(painting_options, synth::FrameOptions{}, scan_options);
+      args.resolution > 0
+          ? args.resolution
+          : synth::MatchedResolution(painting_options, synth::FrameOptions{}, scan_options);
   painting_options.seed = args.seed;
   if (Status s = painting_options.Validate(); !s.ok()) return Fail(cmd, s.message());
   if (Status s = scan_options.Validate(); !s.ok()) return Fail(cmd, s.message());
@@ -67,10 +68,11 @@ int RunDemo(const DemoArgs& args) {
   const FolderOutput output{cmd, "demo", {}};
   if (Status s = CheckFolderOutput(out, output); !s.ok()) return Fail(cmd, s.message());
 
-  std::printf("digitize demo: a synthetic %.0f x %.0f mm painting (%d texels on the long side), "
-              "framed, scanned at %dx%d with %.3f mm noise, %.0f deg tilt, holes and outliers\n",
-              painting_options.width_mm, painting_options.height_mm, painting_options.resolution_px, args.scan_px,
-              args.scan_px, args.noise_mm, scan_options.tilt_deg);
+  std::printf(
+      "digitize demo: a synthetic %.0f x %.0f mm painting (%d texels on the long side), "
+      "framed, scanned at %dx%d with %.3f mm noise, %.0f deg tilt, holes and outliers\n",
+      painting_options.width_mm, painting_options.height_mm, painting_options.resolution_px,
+      args.scan_px, args.scan_px, args.noise_mm, scan_options.tilt_deg);
   std::fflush(stdout);  // before the progress bars on stderr
   PreprocessResult result;
   synth::Painting painting;
@@ -91,7 +93,8 @@ int RunDemo(const DemoArgs& args) {
     if (!r.ok()) return Fail(cmd, r.error().message);
     result = std::move(r).value();
   }
-  for (const StepReport& step : result.steps) std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
+  for (const StepReport& step : result.steps)
+    std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf("preprocess total %.3f s\n\n", result.total_seconds);
 
   const synth::PreprocessAccuracy acc = synth::MeasureAccuracy(result, painting, scan);
@@ -106,16 +109,16 @@ int RunDemo(const DemoArgs& args) {
   std::printf("  relief above delta0     %zu texels, %zu outside every box [0]\n",
               acc.relief_texels_true, acc.relief_texels_uncovered);
 
-
   // Photos of the same painting under known lights, in the scan's frame (as a calibrated rig
   // would give them), then the fit on the PREPROCESSED canvas, judged on held-out photos.
   std::optional<synth::SyntheticPhotoSet> photos;
   std::optional<ReflectanceFitResult> fit;
   if (!args.no_fit) {
-    std::printf("\nphotos: %d light(s) x %d camera(s), %s, noise %.4f; held out: %d light(s) x 2 "
-                "views\n",
-                photo_options.lights, photo_options.cameras, synth::ToString(photo_options.encoding),
-                photo_options.noise_sigma, photo_options.held_out_lights);
+    std::printf(
+        "\nphotos: %d light(s) x %d camera(s), %s, noise %.4f; held out: %d light(s) x 2 "
+        "views\n",
+        photo_options.lights, photo_options.cameras, synth::ToString(photo_options.encoding),
+        photo_options.noise_sigma, photo_options.held_out_lights);
     std::fflush(stdout);
     {
       ProgressBar bar("photos");
@@ -136,18 +139,20 @@ int RunDemo(const DemoArgs& args) {
       std::printf("unmodelled (frame) shadows: %zu dark samples removed, %zu texels refitted\n",
                   fit->report.dark_outliers, fit->report.texels_refitted);
     std::printf("fit: %s\n", fit->report.Brief().c_str());
-    auto score = EvaluateHeldOut(result.field, result.normals, fit->maps,
-                                 result.canvas.canvas_from_scan, photos->held_out,
-                                 photos->held_out_mask);
+    auto score =
+        EvaluateHeldOut(result.field, result.normals, fit->maps, result.canvas.canvas_from_scan,
+                        photos->held_out, photos->held_out_mask);
     if (!score.ok()) return Fail(cmd, score.error().message);
-    std::printf("\nrelighting against ground truth (held-out lights and views, frame shadows "
-                "masked, clipped to white = 1):\n  %s\n  (end to end: the canvas from the noisy "
-                "scan, its own texel grid, 8-bit noisy photos at ~1 px per texel; the fit alone "
-                "on noise-free photos at 2 px per texel reaches >= 40 dB: docs/benchmarks.md)\n",
-                score->Brief().c_str());
+    std::printf(
+        "\nrelighting against ground truth (held-out lights and views, frame shadows "
+        "masked, clipped to white = 1):\n  %s\n  (end to end: the canvas from the noisy "
+        "scan, its own texel grid, 8-bit noisy photos at ~1 px per texel; the fit alone "
+        "on noise-free photos at 2 px per texel reaches >= 40 dB: docs/benchmarks.md)\n",
+        score->Brief().c_str());
     std::printf("parameter errors by paint region (median over texels):\n%s",
-                synth::FormatReflectanceAccuracy(synth::MeasureReflectanceAccuracy(
-                    fit->maps, result.field, result.canvas.canvas_from_scan, *photos, painting))
+                synth::FormatReflectanceAccuracy(
+                    synth::MeasureReflectanceAccuracy(
+                        fit->maps, result.field, result.canvas.canvas_from_scan, *photos, painting))
                     .c_str());
   }
 
@@ -161,15 +166,17 @@ int RunDemo(const DemoArgs& args) {
       return s;
     if (!fit) return Status::Ok();
     if (Status s = synth::WriteSyntheticPhotoSet(dir / "photos", *photos); !s.ok()) return s;
-    if (Status s = WriteReflectanceOutputs(dir / "fit", *fit, fit_options, {"(synthetic, in memory)"});
+    if (Status s =
+            WriteReflectanceOutputs(dir / "fit", *fit, fit_options, {"(synthetic, in memory)"});
         !s.ok())
       return s;
     // The packs, made from the folders just written (as `digitize pack` does), then judged from
     // the files: what a museum keeps is what is measured.
     PackWriteOptions quantised = args.quantised;
     quantised.encoding = PackEncoding::kQuantised;
-    for (const auto& [name, options] : {std::pair<std::string, PackWriteOptions>{"painting.pack.exr", {}},
-                                        {"painting.q.pack.exr", quantised}}) {
+    for (const auto& [name, options] :
+         {std::pair<std::string, PackWriteOptions>{"painting.pack.exr", {}},
+          {"painting.q.pack.exr", quantised}}) {
       auto summary = PackFromFolders(dir / "canvas", dir / "fit", dir / name, options);
       if (!summary.ok()) return Status(summary.error());
       auto read = ReadPack(dir / name);
@@ -198,15 +205,17 @@ int RunDemo(const DemoArgs& args) {
                   p.name.c_str(), p.summary.BytesPerTexel(), p.summary.raw_bytes_per_texel,
                   ToString(p.summary.encoding), p.score.Brief().c_str());
   }
-  std::printf("\noutputs: %s/scan/ (synthetic scan + ground truth), %s/canvas/ (height.exr, "
-              "normals.exr, mask.png, boxes.json, transform.json, report.json)\n",
-              args.out.c_str(), args.out.c_str());
+  std::printf(
+      "\noutputs: %s/scan/ (synthetic scan + ground truth), %s/canvas/ (height.exr, "
+      "normals.exr, mask.png, boxes.json, transform.json, report.json)\n",
+      args.out.c_str(), args.out.c_str());
   if (fit)
-    std::printf("         %s/photos/ (calib.json, images, held_out/, truth/), %s/fit/ (rho_d.exr, "
-                "rho_s.exr, lobe.exr, fit_error.exr, fit_status.png, report.json)\n"
-                "         %s/painting.pack.exr, %s/painting.q.pack.exr (texture packs: `digitize "
-                "inspect`, `digitize verify`)\n",
-                args.out.c_str(), args.out.c_str(), args.out.c_str(), args.out.c_str());
+    std::printf(
+        "         %s/photos/ (calib.json, images, held_out/, truth/), %s/fit/ (rho_d.exr, "
+        "rho_s.exr, lobe.exr, fit_error.exr, fit_status.png, report.json)\n"
+        "         %s/painting.pack.exr, %s/painting.q.pack.exr (texture packs: `digitize "
+        "inspect`, `digitize verify`)\n",
+        args.out.c_str(), args.out.c_str(), args.out.c_str(), args.out.c_str());
   if (fit) {
     const std::filesystem::path pack_path = out / "painting.pack.exr";
     if (gallery.ok())
@@ -240,11 +249,15 @@ void AddDemoCommand(CLI::App& app, int& exit_code) {
   c->add_option("--seed", args->seed, "Random seed")->capture_default_str();
   AddPreprocessFlags(c, args->options);
   c->add_option("--lights", args->photos.lights, "Point lights of the photo set (dome)")
-      ->capture_default_str()->group("Photos");
+      ->capture_default_str()
+      ->group("Photos");
   c->add_option("--cameras", args->photos.cameras, "Cameras of the photo set (arc over the canvas)")
-      ->capture_default_str()->group("Photos");
+      ->capture_default_str()
+      ->group("Photos");
   c->add_option("--photo-noise", args->photos.noise_sigma,
-                "Photo noise sigma (linear units, white = 1)")->capture_default_str()->group("Photos");
+                "Photo noise sigma (linear units, white = 1)")
+      ->capture_default_str()
+      ->group("Photos");
   c->add_flag("--measured", args->measured,
               "Paint one region with a measured 3-lobe paint (not in the fitted model)")
       ->group("Photos");

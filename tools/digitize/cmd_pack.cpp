@@ -20,10 +20,13 @@ void AddPackCommand(CLI::App& app, int& exit_code) {
       "texture pack: a multi-part half-float OpenEXR file with everything the viewer needs "
       "(docs/formats.md, \"Texture packs\").");
   c->add_option("--canvas", args->canvas, "Folder written by `digitize preprocess`")
-      ->required()->check(CLI::ExistingDirectory);
+      ->required()
+      ->check(CLI::ExistingDirectory);
   c->add_option("--fit", args->fit, "Folder written by `digitize fit` on that canvas")
-      ->required()->check(CLI::ExistingDirectory);
-  c->add_option("-o,--out", args->out, "Pack file to write (e.g. painting.pack.exr; replaced only on success)")
+      ->required()
+      ->check(CLI::ExistingDirectory);
+  c->add_option("-o,--out", args->out,
+                "Pack file to write (e.g. painting.pack.exr; replaced only on success)")
       ->required();
   AddPackWriteFlags(c, args->options, args->quantised);
   c->callback([args, &exit_code] {
@@ -46,8 +49,9 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
   };
   auto args = std::make_shared<Args>();
   CLI::App* c = app.add_subcommand(
-      "inspect", "Summary of a texture pack from its header: size, resolution, boxes, fit brief, "
-                 "provenance (no pixel is decoded; `digitize verify` checks them)");
+      "inspect",
+      "Summary of a texture pack from its header: size, resolution, boxes, fit brief, "
+      "provenance (no pixel is decoded; `digitize verify` checks them)");
   c->add_option("pack", args->pack, "Pack file")->required();
   c->add_flag("--json", args->json, "Print the summary as JSON");
   c->callback([args, &exit_code] {
@@ -61,8 +65,9 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
       std::printf("%s\n", PackSummaryJson(args->pack, *s).c_str());
     } else {
       PrintPackSummaryLine(args->pack, *s);
-      std::printf("  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",
-                  s->version, ToString(s->encoding), s->raw_bytes_per_texel);
+      std::printf(
+          "  format      digitize.pack v%d, %s encoding, %d bytes/texel before compression\n",
+          s->version, ToString(s->encoding), s->raw_bytes_per_texel);
       if (s->encoding == PackEncoding::kQuantised)
         std::printf("  mantissa    height %d, normal %d, rho %d, lobe %d bits (of 10)\n",
                     s->quantisation.height_bits, s->quantisation.normal_bits,
@@ -88,8 +93,9 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
 void AddVerifyCommand(CLI::App& app, int& exit_code) {
   auto path = std::make_shared<std::string>();
   CLI::App* c = app.add_subcommand(
-      "verify", "Full validation of a texture pack: header, every value, checksum, boxes against "
-                "the heights. Exit 0 when valid, 1 with the first problem otherwise.");
+      "verify",
+      "Full validation of a texture pack: header, every value, checksum, boxes against "
+      "the heights. Exit 0 when valid, 1 with the first problem otherwise.");
   c->add_option("pack", *path, "Pack file")->required();
   c->callback([path, &exit_code] {
     auto v = VerifyPack(*path);

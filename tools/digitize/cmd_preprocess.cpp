@@ -29,10 +29,12 @@ int RunPreprocess(const PreprocessArgs& args) {
   Result<PreprocessResult> result = PreprocessToFolder(o, bar.Callback());
   bar.Finish();
   if (!result.ok()) return Fail(cmd, result.error().message);
-  for (const StepReport& step : result->steps) std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
-  std::printf("total %.3f s; outputs in %s/ (height.exr, normals.exr, mask.png, boxes.json, "
-              "transform.json, report.json)\n",
-              result->total_seconds, args.out.c_str());
+  for (const StepReport& step : result->steps)
+    std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
+  std::printf(
+      "total %.3f s; outputs in %s/ (height.exr, normals.exr, mask.png, boxes.json, "
+      "transform.json, report.json)\n",
+      result->total_seconds, args.out.c_str());
   return 0;
 }
 
@@ -47,21 +49,28 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
   c->add_option("scans", args->scans,
                 "Scan file(s): float EXR/TIFF (XYZ mm, or depth with --pixel-pitch-mm), 16-bit "
                 "PNG/TIFF (with --height-scale-mm), PLY point grid")
-      ->required()->check(CLI::ExistingFile);
+      ->required()
+      ->check(CLI::ExistingFile);
   c->add_option("-o,--out", args->out,
                 "Output folder: new, empty, or an earlier canvas output (replaced only on success)")
       ->required()
       ->transform(FolderPath());
   c->add_option("--mask", args->mask, "Mask image, same size as the scan; 0 = missing sample")
-      ->check(CLI::ExistingFile)->group("Input");
+      ->check(CLI::ExistingFile)
+      ->group("Input");
   c->add_option("--pixel-pitch-mm", args->read.pixel_pitch_mm,
-                "Sample spacing (mm) of depth-only inputs")->group("Input");
+                "Sample spacing (mm) of depth-only inputs")
+      ->group("Input");
   c->add_option("--height-scale-mm", args->read.height_scale_mm,
-                "mm per count for 16-bit depth images")->group("Input");
+                "mm per count for 16-bit depth images")
+      ->group("Input");
   c->add_option("--height-offset-mm", args->read.height_offset_mm,
-                "Added to 16-bit depth after scaling (mm)")->group("Input");
-  c->add_option("--grid", args->grid, "WIDTH HEIGHT of a PLY point grid without a 'comment grid' line")
-      ->expected(2)->group("Input");
+                "Added to 16-bit depth after scaling (mm)")
+      ->group("Input");
+  c->add_option("--grid", args->grid,
+                "WIDTH HEIGHT of a PLY point grid without a 'comment grid' line")
+      ->expected(2)
+      ->group("Input");
   AddPreprocessFlags(c, args->options);
   c->callback([args, &exit_code] { exit_code = RunPreprocess(*args); });
 }

@@ -21,7 +21,8 @@ struct SynthArgs {
   std::string model = "ortho";
   std::vector<int> scan_size;
   std::vector<double> frame_sides, bevel, offset;
-  bool no_frame = false, no_weave = false, no_strokes = false, no_impasto = false, no_cracks = false;
+  bool no_frame = false, no_weave = false, no_strokes = false, no_impasto = false,
+       no_cracks = false;
   // Photo set (--photos).
   bool photos = false, measured = false;
   synth::PhotoSimOptions photo;
@@ -35,8 +36,8 @@ int RunSynth(SynthArgs args) {
   args.painting.impasto = !args.no_impasto;
   args.painting.craquelure = !args.no_cracks;
   args.frame.enabled = !args.no_frame;
-  args.scan.model = args.model == "pinhole" ? synth::ScannerModel::kPinhole
-                                            : synth::ScannerModel::kOrthographic;
+  args.scan.model =
+      args.model == "pinhole" ? synth::ScannerModel::kPinhole : synth::ScannerModel::kOrthographic;
   if (args.scan_size.size() == 2) {
     args.scan.width_px = args.scan_size[0];
     args.scan.height_px = args.scan_size[1];
@@ -95,9 +96,10 @@ int RunSynth(SynthArgs args) {
       });
   bar.Finish();
   if (!written.ok()) return Fail(cmd, written.message());
-  std::printf("synthetic painting %.0f x %.0f mm, %dx%d texels; scan %dx%d (%zu exposure(s)) -> %s/\n",
-              painting.width_mm, painting.height_mm, painting.truth.width(), painting.truth.height(),
-              args.scan.width_px, args.scan.height_px, scan.exposures.size(), args.out.c_str());
+  std::printf(
+      "synthetic painting %.0f x %.0f mm, %dx%d texels; scan %dx%d (%zu exposure(s)) -> %s/\n",
+      painting.width_mm, painting.height_mm, painting.truth.width(), painting.truth.height(),
+      args.scan.width_px, args.scan.height_px, scan.exposures.size(), args.out.c_str());
   if (args.photos) {
     std::printf("photo set: %s -> %s/photos/\n", photos.Brief().c_str(), args.out.c_str());
   }
@@ -116,21 +118,29 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->transform(FolderPath());
   auto& p = args->painting;
   c->add_option("--seed", p.seed, "Random seed (same seed, same data)")->capture_default_str();
-  c->add_option("--width-mm", p.width_mm, "Canvas width (mm)")->capture_default_str()->group("Painting");
-  c->add_option("--height-mm", p.height_mm, "Canvas height (mm)")->capture_default_str()->group("Painting");
+  c->add_option("--width-mm", p.width_mm, "Canvas width (mm)")
+      ->capture_default_str()
+      ->group("Painting");
+  c->add_option("--height-mm", p.height_mm, "Canvas height (mm)")
+      ->capture_default_str()
+      ->group("Painting");
   c->add_option("--resolution", p.resolution_px, "Texels along the longer canvas side (64..8192)")
-      ->capture_default_str()->group("Painting");
+      ->capture_default_str()
+      ->group("Painting");
   c->add_option("--impasto-max-mm", p.impasto_max_mm, "Highest impasto (mm)")
-      ->capture_default_str()->group("Painting");
+      ->capture_default_str()
+      ->group("Painting");
   c->add_flag("--no-weave", args->no_weave, "No canvas weave")->group("Painting");
   c->add_flag("--no-strokes", args->no_strokes, "No brush strokes")->group("Painting");
   c->add_flag("--no-impasto", args->no_impasto, "No impasto / knife work")->group("Painting");
   c->add_flag("--no-cracks", args->no_cracks, "No craquelure")->group("Painting");
   c->add_flag("--no-frame", args->no_frame, "No frame and wall: the canvas alone")->group("Frame");
   c->add_option("--frame-raise-mm", args->frame.raise_mm, "Frame height above the canvas (mm)")
-      ->capture_default_str()->group("Frame");
+      ->capture_default_str()
+      ->group("Frame");
   c->add_option("--frame-width-mm", args->frame.width_mm, "Frame width (mm)")
-      ->capture_default_str()->group("Frame");
+      ->capture_default_str()
+      ->group("Frame");
   c->add_option("--frame-sides-mm", args->frame_sides,
                 "Per-side frame widths LEFT RIGHT TOP BOTTOM (mm; 0 = --frame-width-mm)")
       ->expected(4)
@@ -148,30 +158,49 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->group("Painting");
   auto& s = args->scan;
-  c->add_option("--scan-size", args->scan_size, "Scan grid WIDTH HEIGHT (samples)")->expected(2)->group("Scan");
+  c->add_option("--scan-size", args->scan_size, "Scan grid WIDTH HEIGHT (samples)")
+      ->expected(2)
+      ->group("Scan");
   c->add_option("--model", args->model, "Scanner model")
-      ->check(CLI::IsMember({"ortho", "pinhole"}))->capture_default_str()->group("Scan");
+      ->check(CLI::IsMember({"ortho", "pinhole"}))
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--tilt-deg", s.tilt_deg, "Canvas tilt against the scanner (degrees)")
-      ->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--tilt-axis-deg", s.tilt_axis_deg, "Direction of the tilt axis (degrees)")
-      ->capture_default_str()->group("Scan");
-  c->add_option("--roll-deg", s.roll_deg, "In-plane rotation (degrees)")->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
+  c->add_option("--roll-deg", s.roll_deg, "In-plane rotation (degrees)")
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--distance-mm", s.distance_mm, "Scanner to canvas centre (mm)")
-      ->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--margin", s.field_margin, "Field of view beyond canvas + frame (share)")
-      ->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--noise-mm", s.noise_mm, "Gaussian noise sigma along the ray (mm)")
-      ->capture_default_str()->group("Scan");
-  c->add_option("--dropout", s.dropout, "Share of samples lost at random")->capture_default_str()->group("Scan");
-  c->add_option("--hole-blobs", s.hole_blobs, "Blob-shaped holes")->capture_default_str()->group("Scan");
+      ->capture_default_str()
+      ->group("Scan");
+  c->add_option("--dropout", s.dropout, "Share of samples lost at random")
+      ->capture_default_str()
+      ->group("Scan");
+  c->add_option("--hole-blobs", s.hole_blobs, "Blob-shaped holes")
+      ->capture_default_str()
+      ->group("Scan");
   c->add_option("--border-holes", s.border_hole_blobs, "Blob-shaped holes on the canvas outline")
       ->capture_default_str()
       ->group("Scan");
   c->add_option("--offset-mm", args->offset, "Canvas centre off the optical axis: X Y (mm)")
       ->expected(2)
       ->group("Scan");
-  c->add_option("--outliers", s.outliers, "Share of outlier samples")->capture_default_str()->group("Scan");
-  c->add_option("--exposures", s.exposures, "Exposures of the same pose")->capture_default_str()->group("Scan");
+  c->add_option("--outliers", s.outliers, "Share of outlier samples")
+      ->capture_default_str()
+      ->group("Scan");
+  c->add_option("--exposures", s.exposures, "Exposures of the same pose")
+      ->capture_default_str()
+      ->group("Scan");
   auto& ph = args->photo;
   CLI::Option* photos =
       c->add_flag("--photos", args->photos,
@@ -179,22 +208,31 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
                   "held-out renders, reflectance truth) into <out>/photos/")
           ->group("Photos");
   c->add_option("--lights", ph.lights, "Point lights on a dome around the canvas (count)")
-      ->capture_default_str()->needs(photos)->group("Photos");
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
   c->add_option("--cameras", ph.cameras,
                 "Cameras on an arc through the canvas normal (count; 1 = straight above)")
-      ->capture_default_str()->needs(photos)->group("Photos");
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
   c->add_option("--photo-encoding", args->photo_encoding,
                 "Image files: 8-bit sRGB PNG, 16-bit sRGB PNG, or linear float EXR")
-      ->check(CLI::IsMember({"srgb8", "srgb16", "exr"}))->capture_default_str()->needs(photos)
+      ->check(CLI::IsMember({"srgb8", "srgb16", "exr"}))
+      ->capture_default_str()
+      ->needs(photos)
       ->group("Photos");
   c->add_option("--photo-noise", ph.noise_sigma,
                 "Gaussian noise sigma of the fitting images (linear radiance; white Lambertian at "
                 "normal incidence reads 0.8)")
-      ->capture_default_str()->needs(photos)->group("Photos");
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
   c->add_flag("--measured", args->measured,
               "Add a measured paint (bluepaint, Lafortune 1997) outside the fitted one-lobe family "
               "as a 7th material (off by default)")
-      ->needs(photos)->group("Photos");
+      ->needs(photos)
+      ->group("Photos");
   c->callback([args, &exit_code] { exit_code = RunSynth(*args); });
 }
 

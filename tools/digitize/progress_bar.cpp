@@ -8,7 +8,8 @@
 namespace digitize::cli {
 
 ProgressBar::ProgressBar(std::string title)
-    : title_(std::move(title)), tty_(::isatty(STDERR_FILENO) != 0),
+    : title_(std::move(title)),
+      tty_(::isatty(STDERR_FILENO) != 0),
       start_(std::chrono::steady_clock::now()) {}
 
 ProgressBar::~ProgressBar() { Finish(); }

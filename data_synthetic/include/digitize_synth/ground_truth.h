@@ -13,19 +13,19 @@
 namespace digitize::synth {
 
 struct PreprocessAccuracy {
-  double normal_error_deg = 0;     // canvas plane normal vs truth
-  double mask_iou = 0;             // estimated vs true canvas mask in scan pixels
-  size_t frame_pixels_kept = 0;    // true frame/wall pixels in the estimated mask
+  double normal_error_deg = 0;            // canvas plane normal vs truth
+  double mask_iou = 0;                    // estimated vs true canvas mask in scan pixels
+  size_t frame_pixels_kept = 0;           // true frame/wall pixels in the estimated mask
   double frame_pixels_max_height_mm = 0;  // of those, the largest |height| above the true canvas
                                           // plane (a wall foot within noise of the plane is
                                           // indistinguishable from canvas)
-  double height_rmse_mm = 0;       // on texels with height, true surface vs estimate, along the
-                                   // true normal, after removing the constant offset (the zero
-                                   // of heights is a convention: see height_field.h)
-  double height_offset_mm = 0;     // that constant offset
-  double normals_median_deg = 0;   // per-texel normal error, median
+  double height_rmse_mm = 0;      // on texels with height, true surface vs estimate, along the
+                                  // true normal, after removing the constant offset (the zero
+                                  // of heights is a convention: see height_field.h)
+  double height_offset_mm = 0;    // that constant offset
+  double normals_median_deg = 0;  // per-texel normal error, median
   double normals_p90_deg = 0;
-  size_t relief_texels_true = 0;   // true texels above delta0 (outside specks)
+  size_t relief_texels_true = 0;       // true texels above delta0 (outside specks)
   size_t relief_texels_uncovered = 0;  // of those, not inside any box
   size_t texels_compared = 0;
   // Added for diagnostics:

@@ -24,14 +24,14 @@ struct PaintingOptions {
   bool weave = true;
   double weave_period_mm = 1.0, weave_amplitude_mm = 0.03;
   bool strokes = true;
-  int stroke_count = 0;                    // 0 = from the area (about one per 20 cm^2)
+  int stroke_count = 0;                              // 0 = from the area (about one per 20 cm^2)
   double stroke_min_mm = 0.05, stroke_max_mm = 0.3;  // ridge heights
   bool impasto = true;
-  int impasto_count = 0;                   // 0 = from the area (about one per 60 cm^2)
-  double impasto_max_mm = 2.5;             // blob / knife-stroke heights up to this
+  int impasto_count = 0;        // 0 = from the area (about one per 60 cm^2)
+  double impasto_max_mm = 2.5;  // blob / knife-stroke heights up to this
   bool craquelure = true;
   double crack_depth_mm = 0.08, crack_width_mm = 0.4;
-  int region_count = 6;                    // paint regions (0 .. region_count-1)
+  int region_count = 6;  // paint regions (0 .. region_count-1)
   // Bowed canvas: the bare canvas sags (negative) or bulges towards the viewer (positive) by
   // bow_mm at its centre and stays at 0 on its outline (a canvas held by its stretcher):
   // bow(X, Y) = bow_mm (1 - u^2) (1 - v^2), u = 2X/W - 1, v = 2Y/H - 1. Part of the truth heights.
@@ -41,9 +41,9 @@ struct PaintingOptions {
 };
 
 struct Painting {
-  HeightField truth;           // all texels kMeasured; mm
-  Grid<Vec3f> normals;         // analytic normals of the band-limited surface, canvas frame
-  Grid<uint8_t> region;        // paint region id per texel
+  HeightField truth;     // all texels kMeasured; mm
+  Grid<Vec3f> normals;   // analytic normals of the band-limited surface, canvas frame
+  Grid<uint8_t> region;  // paint region id per texel
   double width_mm = 0, height_mm = 0;
   // Least-squares plane of the bare canvas (the bow without paint) over the canvas, canvas frame:
   // Z = bare_plane_offset_mm + bare_plane_slope.x() X' + bare_plane_slope.y() Y' with X', Y'

@@ -20,7 +20,7 @@
 namespace digitize::synth {
 
 struct RegionReflectanceError {
-  int material = 0;             // index into SyntheticPhotoSet::materials
+  int material = 0;  // index into SyntheticPhotoSet::materials
   std::string name;
   bool is_measured = false;     // no one-lobe truth: the errors below are 0, only the texel count
   bool has_lobe = false;        // the truth has a lobe (rho_s > 0); else the two lobe errors are 0

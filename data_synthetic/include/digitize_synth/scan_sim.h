@@ -13,8 +13,8 @@ namespace digitize::synth {
 
 struct FrameOptions {
   bool enabled = true;
-  double raise_mm = 25;   // frame top above the canvas plane (15-40 typical), sharp step inwards
-  double width_mm = 45;   // frame moulding width (30-60 typical)
+  double raise_mm = 25;  // frame top above the canvas plane (15-40 typical), sharp step inwards
+  double width_mm = 45;  // frame moulding width (30-60 typical)
   double wall_depth_mm = 20;  // wall plane below the canvas plane (behind the painting)
   // Asymmetric moulding: per-side widths (canvas frame: left = X 0, right = X W, bottom = Y 0,
   // top = Y H, i.e. the top of the scan image when upright); 0 = width_mm.
@@ -57,8 +57,8 @@ class Scene {
   enum class Hit : uint8_t { kNone = 0, kCanvas = 1, kFrame = 2, kWall = 3 };
   struct RayHit {
     Hit what = Hit::kNone;
-    double t = 0;          // distance along the unit direction
-    Vec3d normal{0, 0, 1}; // geometric normal, canvas frame, unit, facing the ray origin
+    double t = 0;           // distance along the unit direction
+    Vec3d normal{0, 0, 1};  // geometric normal, canvas frame, unit, facing the ray origin
   };
   // Rays in the canvas frame (mm). Thread-safe. direction need not be unit.
   void Intersect(const std::vector<Vec3d>& origins, const std::vector<Vec3d>& directions,
@@ -101,8 +101,8 @@ struct ScanSimOptions {
   int hole_blobs = 4;          // blob-shaped holes
   int border_hole_blobs = 0;   // blob-shaped holes centred on the visible canvas's outline
   double hole_blob_radius_px = 6;
-  double outliers = 1e-4;      // share of samples displaced by +-(2..50) mm
-  int exposures = 1;           // same pose, independent noise and dropouts
+  double outliers = 1e-4;  // share of samples displaced by +-(2..50) mm
+  int exposures = 1;       // same pose, independent noise and dropouts
   uint64_t seed = 1;
   Status Validate() const;
 };

@@ -8,7 +8,8 @@
 //   truth_mask_scan.png      per scan pixel: 255 = the ray hits the canvas, 0 = not;
 //   truth_hit_scan.png       per scan pixel: what the ray hits (0 none, 1 canvas, 2 frame, 3 wall);
 //   truth.json               canvas_from_scan (4x4 and rotation + translation), canvas and scan
-//                            sizes, pitch, every option and seed (format "digitize.synthetic_truth").
+//                            sizes, pitch, every option and seed (format
+//                            "digitize.synthetic_truth").
 #pragma once
 
 #include <filesystem>

@@ -3,6 +3,8 @@
 // Layer: core (depends on nothing but Eigen and the standard library).
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -16,9 +18,6 @@
 #include <utility>
 #include <variant>
 #include <vector>
-
-#include <Eigen/Core>
-#include <Eigen/Geometry>
 
 namespace digitize {
 
@@ -34,7 +33,7 @@ struct Error {
 template <class T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : state_(std::move(value)) {}  // NOLINT: implicit by design
+  Result(T value) : state_(std::move(value)) {}      // NOLINT: implicit by design
   Result(Error error) : state_(std::move(error)) {}  // NOLINT
 
   bool ok() const { return std::holds_alternative<T>(state_); }
@@ -81,11 +80,11 @@ class InvariantError : public std::logic_error {
   using std::logic_error::logic_error;
 };
 
-#define DIGITIZE_CHECK(cond, msg)                                                        \
-  do {                                                                                   \
-    if (!(cond))                                                                         \
-      throw ::digitize::InvariantError(std::string(__FILE__) + ":" +                     \
-                                       std::to_string(__LINE__) + ": " + (msg));         \
+#define DIGITIZE_CHECK(cond, msg)                                                               \
+  do {                                                                                          \
+    if (!(cond))                                                                                \
+      throw ::digitize::InvariantError(std::string(__FILE__) + ":" + std::to_string(__LINE__) + \
+                                       ": " + (msg));                                           \
   } while (0)
 
 // ---------------------------------------------------------------------------------------------
@@ -130,7 +129,9 @@ using Mat3d = Eigen::Matrix3d;
 
 inline constexpr float kMissing = std::numeric_limits<float>::quiet_NaN();
 
-inline bool IsValid(const Vec3f& p) { return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()); }
+inline bool IsValid(const Vec3f& p) {
+  return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+}
 
 // ---------------------------------------------------------------------------------------------
 // Rigid transforms. Names say the frames: `canvas_from_scan.Apply(p_scan)` gives p in the canvas
@@ -182,7 +183,8 @@ inline std::string FormatNumber(double v, int significant_digits = 6) {
 // pass nothing. Called from one thread at a time, at most a few hundred times per step.
 using ProgressCallback = std::function<void(std::string_view step, double fraction)>;
 
-inline void ReportProgress(const ProgressCallback& progress, std::string_view step, double fraction) {
+inline void ReportProgress(const ProgressCallback& progress, std::string_view step,
+                           double fraction) {
   if (progress) progress(step, fraction);
 }
 

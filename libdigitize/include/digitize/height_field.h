@@ -6,7 +6,8 @@
 // canvas surface, relief excluded).
 //
 // Texel grid: row 0 is the TOP of the canvas (the image convention, so height maps look like the
-// scan). Texel (x, y) has its centre at X = (x + 0.5) * pitch_mm, Y = (height - y - 0.5) * pitch_mm.
+// scan). Texel (x, y) has its centre at X = (x + 0.5) * pitch_mm, Y = (height - y - 0.5) *
+// pitch_mm.
 #pragma once
 
 #include <cstdint>
@@ -23,12 +24,14 @@ enum class TexelState : uint8_t {
   kUnfilled = 3,  // inside a hole too large to fill: height is inpainted for continuity only
 };
 
-inline bool HasHeight(TexelState s) { return s == TexelState::kMeasured || s == TexelState::kFilled; }
+inline bool HasHeight(TexelState s) {
+  return s == TexelState::kMeasured || s == TexelState::kFilled;
+}
 
 struct HeightField {
-  Grid<float> height_mm;       // never NaN/Inf; 0 where kOutside
-  Grid<TexelState> state;      // same size as height_mm
-  double pitch_mm = 0.0;       // texel spacing along X and Y
+  Grid<float> height_mm;   // never NaN/Inf; 0 where kOutside
+  Grid<TexelState> state;  // same size as height_mm
+  double pitch_mm = 0.0;   // texel spacing along X and Y
 
   int width() const { return height_mm.width; }
   int height() const { return height_mm.height; }

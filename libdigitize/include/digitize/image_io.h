@@ -55,9 +55,11 @@ using ImageMetadata = std::map<std::string, std::string>;
 Status WriteFloatExr(const std::filesystem::path& path, const Grid<float>& image,
                      const std::string& channel, const ImageMetadata& metadata = {});
 Status WriteFloatExr(const std::filesystem::path& path, const Grid<Vec3f>& image,
-                     const std::array<std::string, 3>& channels, const ImageMetadata& metadata = {});
+                     const std::array<std::string, 3>& channels,
+                     const ImageMetadata& metadata = {});
 Status WriteFloatExr(const std::filesystem::path& path, const Grid<std::array<float, 4>>& image,
-                     const std::array<std::string, 4>& channels, const ImageMetadata& metadata = {});
+                     const std::array<std::string, 4>& channels,
+                     const ImageMetadata& metadata = {});
 // 8-bit single-channel PNG (masks), values written as they are.
 Status WritePng8(const std::filesystem::path& path, const Grid<uint8_t>& image);
 // 8-bit RGB PNG (previews).
@@ -77,9 +79,9 @@ Status WriteRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_
 // channel count they need).
 struct FloatImage {
   int width = 0, height = 0, channels = 0;
-  std::vector<float> pixels;  // interleaved
-  std::string format;         // "openexr", "tiff", "png", ...
-  int bits_per_sample = 0;    // 8, 16, 32 (for integer formats: the original depth)
+  std::vector<float> pixels;     // interleaved
+  std::string format;            // "openexr", "tiff", "png", ...
+  int bits_per_sample = 0;       // 8, 16, 32 (for integer formats: the original depth)
   bool integer_samples = false;  // stored as integers: OIIO mapped 0..2^bits-1 onto [0, 1]
   std::vector<std::string> channel_names;  // as stored: {"X","Y","Z"}, {"R","G","B"}, {"Y"}, ...
   ImageMetadata metadata;
@@ -98,6 +100,7 @@ struct ImageHeader {
 };
 Result<ImageHeader> ReadImageHeader(const std::filesystem::path& path);
 
-Result<FloatImage> ReadImage(const std::filesystem::path& path, size_t max_pixels = size_t{1} << 28);
+Result<FloatImage> ReadImage(const std::filesystem::path& path,
+                             size_t max_pixels = size_t{1} << 28);
 
 }  // namespace digitize

@@ -55,12 +55,12 @@ inline constexpr double kPackSizeTolerance = 1e-9;
 
 // A painting, ready for the viewer. Same grid for every map (the HeightField's).
 struct Pack {
-  HeightField field;          // height_mm (never NaN), state, pitch_mm
-  Grid<Vec3f> normals;        // unit, canvas frame, nz > 0
-  ReflectanceMaps maps;       // rho_d, rho_s, lobe (cz = 1), status; fit_error all 0 when read
-  double delta0_mm = 0;       // bump plane (bottom of every box)
-  double max_height_mm = 0;   // H (top of every box)
-  int cell_px = 0;            // box cell size, texels
+  HeightField field;         // height_mm (never NaN), state, pitch_mm
+  Grid<Vec3f> normals;       // unit, canvas frame, nz > 0
+  ReflectanceMaps maps;      // rho_d, rho_s, lobe (cz = 1), status; fit_error all 0 when read
+  double delta0_mm = 0;      // bump plane (bottom of every box)
+  double max_height_mm = 0;  // H (top of every box)
+  int cell_px = 0;           // box cell size, texels
   std::vector<ReliefBox> boxes;
   RigidTransform canvas_from_scan;  // where the canvas sits in the scan / photo frame
   PackProvenance provenance;
@@ -81,10 +81,10 @@ struct Pack {
 // kept value: at most 2^-(bits+1) (round to nearest). The state/status channel is never quantised.
 struct PackQuantisation {
   // Defaults: <= 10 bytes per texel at <= 1 dB relighting loss (docs/benchmarks.md, "Packs").
-  int height_bits = 8;   // 2^-9 relative: 5 um at 2.4 mm of relief, under any scanner's noise
-  int normal_bits = 5;   // nx, ny
-  int rho_bits = 4;      // rho_d, rho_s: 3 % relative
-  int lobe_bits = 6;     // cx, cy, k: kept finer, a glossy lobe (k ~ 500) magnifies its errors
+  int height_bits = 8;      // 2^-9 relative: 5 um at 2.4 mm of relief, under any scanner's noise
+  int normal_bits = 5;      // nx, ny
+  int rho_bits = 4;         // rho_d, rho_s: 3 % relative
+  int lobe_bits = 6;        // cx, cy, k: kept finer, a glossy lobe (k ~ 500) magnifies its errors
   Status Validate() const;  // each in [0, 10]
 };
 
@@ -99,7 +99,7 @@ struct PackWriteOptions {
 
 // Bounds the reader applies before allocating anything a header claims.
 struct PackReadOptions {
-  int64_t max_texels = int64_t{1} << 26;  // 8192 x 8192 (~4 GiB in memory as a Pack)
+  int64_t max_texels = int64_t{1} << 26;        // 8192 x 8192 (~4 GiB in memory as a Pack)
   int64_t max_header_bytes = int64_t{1} << 22;  // all part headers together
 };
 
@@ -113,7 +113,7 @@ struct PackSummary {
   size_t box_count = 0;
   PackEncoding encoding = PackEncoding::kHalf;
   PackQuantisation quantisation;
-  std::string gauge;        // "lafortune1:cz=1,tangent"
+  std::string gauge;  // "lafortune1:cz=1,tangent"
   PackProvenance provenance;
   uint64_t file_bytes = 0;
   int raw_bytes_per_texel = 0;  // uncompressed texel channels of the surface + reflectance parts
@@ -124,7 +124,8 @@ struct PackSummary {
 
 // A pack from a preprocessed canvas (ReadPreprocessOutputs: field, normals, boxes) and the
 // reflectance maps fitted on it. Errors: different grid sizes, or a pack that does not Validate.
-Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps, PackProvenance provenance);
+Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps,
+                          PackProvenance provenance);
 
 // Writes atomically (temporary file beside `path`, then rename). Refuses a pack that does not
 // Validate() or whose values do not fit in half (|v| > 65504), naming the map and texel.

@@ -24,13 +24,13 @@ struct PreprocessOptions {
   ResampleOptions resample;
   ReliefOptions relief;
   bool noise_margin_from_scan = true;  // relief.noise_margin_mm = 2 x the estimated noise sigma
-  Status Validate() const;  // validates every part, message says which option
+  Status Validate() const;             // validates every part, message says which option
 };
 
 struct StepReport {
-  std::string name;     // "merge", "sanitize", "canvas", "resample", "relief", "normals"
-  double seconds = 0;   // wall time
-  std::string line;     // one human-readable line: what was done and found
+  std::string name;    // "merge", "sanitize", "canvas", "resample", "relief", "normals"
+  double seconds = 0;  // wall time
+  std::string line;    // one human-readable line: what was done and found
 };
 
 struct PreprocessResult {
@@ -48,8 +48,7 @@ struct PreprocessResult {
 // Errors: invalid options, exposures that cannot be merged, no canvas found (messages name the
 // scan's source). Never returns NaN/Inf in any grid. Takes the scans by value: move them in to
 // save a copy of a big scan (clean-up works in place).
-Result<PreprocessResult> Preprocess(std::vector<Scan> exposures,
-                                    const PreprocessOptions& options,
+Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const PreprocessOptions& options,
                                     const ProgressCallback& progress = nullptr);
 
 // The report as JSON text (docs/formats.md, "preprocess report").

@@ -41,11 +41,11 @@ namespace digitize {
 struct ReflectanceFitOptions {
   SampleOptions samples;
   BrdfFitOptions fit;
-  int tile_texels = 32768;          // texels gathered and fitted at a time (memory bound)
-  double dark_outlier_ratio = 0.5;  // before the fit, vs the median floor; <= 0 disables the
-                                    // unmodelled-shadow removal (see above)
+  int tile_texels = 32768;              // texels gathered and fitted at a time (memory bound)
+  double dark_outlier_ratio = 0.5;      // before the fit, vs the median floor; <= 0 disables the
+                                        // unmodelled-shadow removal (see above)
   double dark_outlier_fit_ratio = 0.7;  // after the fit, vs the fitted diffuse floor (a lit
-                                         // sample is never below it but for noise)
+                                        // sample is never below it but for noise)
   double dark_outlier_sigmas = 6.0;
   int dark_outlier_rounds = 2;
   Status Validate() const;
@@ -70,13 +70,13 @@ struct ReflectanceFitReport {
   // are rejected, n.l <= 0); their entries, in set order.
   std::vector<std::string> light_below_canvas;
   SampleStats samples;
-  BrdfFitSummary fit;           // over the fitted texels; fit.seconds = wall time fitting
-  size_t dark_outliers = 0;     // samples removed as unmodelled shadows
-  size_t texels_refitted = 0;   // texels that lost samples to it
-  size_t texels_outside = 0;    // kOutside texels, not fitted
-  double seconds_tracer = 0;    // building the ray-tracing structure
-  double seconds_samples = 0;   // gathering samples, rays included (wall)
-  double seconds_fit = 0;       // fitting (wall)
+  BrdfFitSummary fit;          // over the fitted texels; fit.seconds = wall time fitting
+  size_t dark_outliers = 0;    // samples removed as unmodelled shadows
+  size_t texels_refitted = 0;  // texels that lost samples to it
+  size_t texels_outside = 0;   // kOutside texels, not fitted
+  double seconds_tracer = 0;   // building the ray-tracing structure
+  double seconds_samples = 0;  // gathering samples, rays included (wall)
+  double seconds_fit = 0;      // fitting (wall)
   double seconds_total = 0;
   // One line: "1.05 M texels x 64 photos: 97.8 % converged, 1.9 % diffuse-only, ...; samples
   // 2.1 s, fit 4.9 s, total 7.4 s".

@@ -18,11 +18,11 @@
 namespace digitize {
 
 struct ReflectanceMaps {
-  Grid<Vec3f> rho_d;               // 1/sr, RGB, >= 0
-  Grid<Vec3f> rho_s;               // 1/sr, RGB, >= 0
-  Grid<std::array<float, 4>> lobe; // (cx, cy, cz = 1, k)
-  Grid<float> fit_error;           // radiance RMS of the fit over its used samples (0 if none)
-  Grid<TexelFitStatus> status;     // per texel
+  Grid<Vec3f> rho_d;                // 1/sr, RGB, >= 0
+  Grid<Vec3f> rho_s;                // 1/sr, RGB, >= 0
+  Grid<std::array<float, 4>> lobe;  // (cx, cy, cz = 1, k)
+  Grid<float> fit_error;            // radiance RMS of the fit over its used samples (0 if none)
+  Grid<TexelFitStatus> status;      // per texel
 
   int width() const { return rho_d.width; }
   int height() const { return rho_d.height; }

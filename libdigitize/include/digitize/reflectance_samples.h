@@ -39,9 +39,9 @@
 namespace digitize {
 
 struct SampleOptions {
-  double min_cos = 0.0;     // n.v and n.l must exceed this (0: anything above the horizon)
-  float black_level = 0.0f; // linear value at or below which a channel counts as black
-  bool reject_black = true; // drop samples black in every channel (clipped at the floor)
+  double min_cos = 0.0;         // n.v and n.l must exceed this (0: anything above the horizon)
+  float black_level = 0.0f;     // linear value at or below which a channel counts as black
+  bool reject_black = true;     // drop samples black in every channel (clipped at the floor)
   bool visibility_rays = true;  // trace rays towards the camera (hidden texels)
   bool shadow_rays = true;      // trace rays towards the light (self-shadowing)
   TraceOptions trace;           // skip_unblockable etc.
@@ -56,7 +56,8 @@ struct SampleStats {
   size_t kept = 0;
   TraceStats view_rays, light_rays;
   SampleStats& operator+=(const SampleStats& o);
-  // "61.2 M candidates, 58.0 M kept (94.8 %); rejected: 1.2 M shadowed, ...; rays: 120 M, 91 % skipped"
+  // "61.2 M candidates, 58.0 M kept (94.8 %); rejected: 1.2 M shadowed, ...; rays: 120 M, 91 %
+  // skipped"
   std::string Brief() const;
 };
 
@@ -66,7 +67,7 @@ struct SampleScene {
   const HeightField* canvas = nullptr;
   const Grid<Vec3f>* normals = nullptr;  // unit, canvas frame, canvas size
   RigidTransform canvas_from_scan;
-  const PhotoSet* photos = nullptr;      // pixels loaded
+  const PhotoSet* photos = nullptr;           // pixels loaded
   const HeightFieldTracer* tracer = nullptr;  // built from *canvas
 };
 
