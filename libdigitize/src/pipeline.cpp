@@ -108,6 +108,31 @@ Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& optio
   return result;
 }
 
+namespace {
+
+// Held-out photos, read before any fit: a bad file fails before minutes of work. None: no path.
+Result<std::optional<PhotoSet>> ReadHeldOut(const std::string& path, const PhotoSetOptions& options,
+                                            const ProgressCallback& progress) {
+  if (path.empty()) return std::optional<PhotoSet>{};
+  Result<PhotoSet> set = ReadPhotoSetFile(path, options, progress);
+  if (!set.ok()) return set.error();
+  return std::optional<PhotoSet>(std::move(set).value());
+}
+
+// The photo-set files and every image they name: inputs no output may touch.
+void AppendPhotoInputs(const std::string& photos_path, const PhotoSet& photos,
+                       const std::string& held_path, const std::optional<PhotoSet>& held,
+                       std::vector<fs::path>& inputs) {
+  inputs.emplace_back(photos_path);
+  for (const Photo& p : photos.photos) inputs.push_back(p.path);
+  if (held) {
+    inputs.emplace_back(held_path);
+    for (const Photo& p : held->photos) inputs.push_back(p.path);
+  }
+}
+
+}  // namespace
+
 Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
                                     const ProgressCallback& progress) {
   if (Status s = options.photo.Validate(); !s.ok()) return Error{s.message()};
@@ -122,19 +147,13 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   const PhotoSet& photos = result.photos;
   const ReflectanceFitOptions fit_options =
       FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
-  std::optional<PhotoSet> held;
-  if (!options.held_out.empty()) {
-    Result<PhotoSet> h = ReadPhotoSetFile(options.held_out, options.photo, progress);
-    if (!h.ok()) return h.error();
-    held = std::move(h).value();
-  }
-  FolderOutput output{"fit", "fit", {options.photos}};
+  Result<std::optional<PhotoSet>> held_read =
+      ReadHeldOut(options.held_out, options.photo, progress);
+  if (!held_read.ok()) return held_read.error();
+  const std::optional<PhotoSet>& held = *held_read;
+  FolderOutput output{"fit", "fit", {}};
   if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
-  for (const Photo& p : photos.photos) output.inputs.push_back(p.path);
-  if (held) {
-    output.inputs.emplace_back(options.held_out);
-    for (const Photo& p : held->photos) output.inputs.push_back(p.path);
-  }
+  AppendPhotoInputs(options.photos, photos, options.held_out, held, output.inputs);
   if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
 
   Result<PreprocessedCanvas> canvas = LoadFitCanvas(options.canvas, photos);
@@ -208,22 +227,15 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   const PhotoSet& photos = result.photos;
   const ReflectanceFitOptions fit_options =
       FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
-  std::optional<PhotoSet> held;
-  if (!options.held_out.empty()) {
-    Result<PhotoSet> h = ReadPhotoSetFile(options.held_out, options.photo, progress);
-    if (!h.ok()) return h.error();
-    held = std::move(h).value();
-  }
+  Result<std::optional<PhotoSet>> held_read =
+      ReadHeldOut(options.held_out, options.photo, progress);
+  if (!held_read.ok()) return held_read.error();
+  const std::optional<PhotoSet>& held = *held_read;
 
   // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
   std::vector<fs::path> inputs(options.scans.begin(), options.scans.end());
   if (!options.read.mask.empty()) inputs.push_back(options.read.mask);
-  inputs.emplace_back(options.photos);
-  for (const Photo& p : photos.photos) inputs.push_back(p.path);
-  if (held) {
-    inputs.emplace_back(options.held_out);
-    for (const Photo& p : held->photos) inputs.push_back(p.path);
-  }
+  AppendPhotoInputs(options.photos, photos, options.held_out, held, inputs);
   const fs::path work(options.work);
   const FolderOutput work_canvas{kCommand, "canvas", inputs}, work_fit{kCommand, "fit", inputs};
   std::vector<fs::path> pack_keeps_off = inputs;

@@ -51,6 +51,17 @@ void AddPackWriteFlags(CLI::App* c, PackWriteOptions& o, bool& quantised) {
       ->group("Pack");
 }
 
+void AddPhotoSetFlags(CLI::App* c, PhotoSetOptions& o) {
+  c->add_option("--rti-pitch-mm", o.rti_pixel_pitch_mm,
+                "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
+                "else 1 mm with a warning)")
+      ->group("Photos");
+  c->add_flag("--allow-outside-paths", o.allow_outside_paths,
+              "Read images the calibration / .lp names outside its folder (.., absolute paths, "
+              "symbolic links); refused by default: a shared capture must not open other files")
+      ->group("Photos");
+}
+
 ScanReadOptions ScanReadOptionsOf(ScanReadOptions read, const std::string& mask,
                                   const std::vector<int>& grid) {
   read.mask = mask;

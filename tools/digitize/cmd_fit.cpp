@@ -108,14 +108,7 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
                 "Encoded level (0..1) at or above which an 8/16-bit channel is saturated")
       ->capture_default_str()
       ->group("Photos");
-  c->add_option("--rti-pitch-mm", args->fit.photo.rti_pixel_pitch_mm,
-                "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
-                "else 1 mm with a warning)")
-      ->group("Photos");
-  c->add_flag("--allow-outside-paths", args->fit.photo.allow_outside_paths,
-              "Read images the calibration / .lp names outside its folder (.., absolute paths, "
-              "symbolic links); refused by default: a shared capture must not open other files")
-      ->group("Photos");
+  AddPhotoSetFlags(c, args->fit.photo);
   c->add_option("--tile-texels", args->fit.fit.tile_texels,
                 "Texels sampled and fitted at a time (memory: ~ tile x photos x 48 bytes)")
       ->capture_default_str()

@@ -98,14 +98,7 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
                     "Samples below this share of the diffuse floor are unmodelled shadows")
           ->capture_default_str()
           ->group("Fit");
-  c->add_option("--rti-pitch-mm", args->pipeline.photo.rti_pixel_pitch_mm,
-                "RTI captures: canvas mm per image pixel (default: the images' resolution tag, "
-                "else 1 mm with a warning)")
-      ->group("Photos");
-  c->add_flag("--allow-outside-paths", args->pipeline.photo.allow_outside_paths,
-              "Read images the calibration / .lp names outside its folder (.., absolute paths, "
-              "symbolic links); refused by default: a shared capture must not open other files")
-      ->group("Photos");
+  AddPhotoSetFlags(c, args->pipeline.photo);
   c->add_option("--threads", args->threads, "Worker threads (0 = all cores)")
       ->capture_default_str()
       ->group("Performance");
