@@ -110,13 +110,27 @@ Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& optio
 
 namespace {
 
-// Held-out photos, read before any fit: a bad file fails before minutes of work. None: no path.
-Result<std::optional<PhotoSet>> ReadHeldOut(const std::string& path, const PhotoSetOptions& options,
-                                            const ProgressCallback& progress) {
-  if (path.empty()) return std::optional<PhotoSet>{};
-  Result<PhotoSet> set = ReadPhotoSetFile(path, options, progress);
+struct PhotosToFit {
+  PhotoSet photos;
+  std::optional<PhotoSet> held;  // none without a held-out path
+  ReflectanceFitOptions fit;     // FitOptionsFor the photos
+};
+
+// The photos and then the held-out ones, both before any fit: a bad file fails before minutes
+// of work. `Options`: FitFolderOptions or PipelineOptions (the same photo fields).
+template <typename Options>
+Result<PhotosToFit> ReadPhotosToFit(const Options& options, const ProgressCallback& progress) {
+  PhotosToFit read;
+  Result<PhotoSet> set = ReadPhotoSetFile(options.photos, options.photo, progress);
   if (!set.ok()) return set.error();
-  return std::optional<PhotoSet>(std::move(set).value());
+  read.photos = std::move(set).value();
+  read.fit = FitOptionsFor(read.photos, options.fit, options.dark_outlier_ratio_chosen);
+  if (!options.held_out.empty()) {
+    Result<PhotoSet> held = ReadPhotoSetFile(options.held_out, options.photo, progress);
+    if (!held.ok()) return held.error();
+    read.held = std::move(held).value();
+  }
+  return read;
 }
 
 // The photo-set files and every image they name: inputs no output may touch.
@@ -141,16 +155,12 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
     if (Status s = CheckCanvasFolder(options.canvas); !s.ok()) return Error{s.message()};
 
   FitFolderResult result;
-  Result<PhotoSet> set = ReadPhotoSetFile(options.photos, options.photo, progress);
-  if (!set.ok()) return set.error();
-  result.photos = std::move(set).value();
+  Result<PhotosToFit> read = ReadPhotosToFit(options, progress);
+  if (!read.ok()) return read.error();
+  result.photos = std::move(read->photos);
   const PhotoSet& photos = result.photos;
-  const ReflectanceFitOptions fit_options =
-      FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
-  Result<std::optional<PhotoSet>> held_read =
-      ReadHeldOut(options.held_out, options.photo, progress);
-  if (!held_read.ok()) return held_read.error();
-  const std::optional<PhotoSet>& held = *held_read;
+  const ReflectanceFitOptions& fit_options = read->fit;
+  const std::optional<PhotoSet>& held = read->held;
   FolderOutput output{"fit", "fit", {}};
   if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
   AppendPhotoInputs(options.photos, photos, options.held_out, held, output.inputs);
@@ -221,16 +231,12 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   PipelineResult result;
 
   // 1. Photos first: a bad calibration fails before minutes of preprocessing.
-  Result<PhotoSet> set = ReadPhotoSetFile(options.photos, options.photo, progress);
-  if (!set.ok()) return set.error();
-  result.photos = std::move(set).value();
+  Result<PhotosToFit> read = ReadPhotosToFit(options, progress);
+  if (!read.ok()) return read.error();
+  result.photos = std::move(read->photos);
   const PhotoSet& photos = result.photos;
-  const ReflectanceFitOptions fit_options =
-      FitOptionsFor(photos, options.fit, options.dark_outlier_ratio_chosen);
-  Result<std::optional<PhotoSet>> held_read =
-      ReadHeldOut(options.held_out, options.photo, progress);
-  if (!held_read.ok()) return held_read.error();
-  const std::optional<PhotoSet>& held = *held_read;
+  const ReflectanceFitOptions& fit_options = read->fit;
+  const std::optional<PhotoSet>& held = read->held;
 
   // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
   std::vector<fs::path> inputs(options.scans.begin(), options.scans.end());
