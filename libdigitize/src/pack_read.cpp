@@ -160,7 +160,8 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
         return Error{name + ": part " + std::to_string(parts.size()) + " attribute '" +
                      EscapeForTerminal(attr) + "' " + problem + "; corrupt OpenEXR header"};
       if (attr == "dataWindow") {
-        if (type != "box2i" || size != 16) return Error{name + ": malformed dataWindow attribute"};
+        if (type != "box2i")  // its size is checked above, as every fixed-size type
+          return Error{name + ": malformed dataWindow attribute"};
         int32_t box[4] = {0, 0, 0, 0};
         for (int32_t& b : box) (void)read_i32(b);
         const int64_t w = int64_t{box[2]} - box[0] + 1, h = int64_t{box[3]} - box[1] + 1;

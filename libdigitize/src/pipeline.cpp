@@ -114,6 +114,8 @@ struct PhotosToFit {
   PhotoSet photos;
   std::optional<PhotoSet> held;  // none without a held-out path
   ReflectanceFitOptions fit;     // FitOptionsFor the photos
+  // The photo-set files and every image they name: inputs no output may touch.
+  std::vector<fs::path> inputs;
 };
 
 // The photos and then the held-out ones, both before any fit: a bad file fails before minutes
@@ -130,19 +132,13 @@ Result<PhotosToFit> ReadPhotosToFit(const Options& options, const ProgressCallba
     if (!held.ok()) return held.error();
     read.held = std::move(held).value();
   }
-  return read;
-}
-
-// The photo-set files and every image they name: inputs no output may touch.
-void AppendPhotoInputs(const std::string& photos_path, const PhotoSet& photos,
-                       const std::string& held_path, const std::optional<PhotoSet>& held,
-                       std::vector<fs::path>& inputs) {
-  inputs.emplace_back(photos_path);
-  for (const Photo& p : photos.photos) inputs.push_back(p.path);
-  if (held) {
-    inputs.emplace_back(held_path);
-    for (const Photo& p : held->photos) inputs.push_back(p.path);
+  read.inputs.emplace_back(options.photos);
+  for (const Photo& p : read.photos.photos) read.inputs.push_back(p.path);
+  if (read.held) {
+    read.inputs.emplace_back(options.held_out);
+    for (const Photo& p : read.held->photos) read.inputs.push_back(p.path);
   }
+  return read;
 }
 
 }  // namespace
@@ -163,7 +159,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   const std::optional<PhotoSet>& held = read->held;
   FolderOutput output{"fit", "fit", {}};
   if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
-  AppendPhotoInputs(options.photos, photos, options.held_out, held, output.inputs);
+  output.inputs.insert(output.inputs.end(), read->inputs.begin(), read->inputs.end());
   if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
 
   Result<PreprocessedCanvas> canvas = LoadFitCanvas(options.canvas, photos);
@@ -241,7 +237,7 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
   std::vector<fs::path> inputs(options.scans.begin(), options.scans.end());
   if (!options.read.mask.empty()) inputs.push_back(options.read.mask);
-  AppendPhotoInputs(options.photos, photos, options.held_out, held, inputs);
+  inputs.insert(inputs.end(), read->inputs.begin(), read->inputs.end());
   const fs::path work(options.work);
   const FolderOutput work_canvas{kCommand, "canvas", inputs}, work_fit{kCommand, "fit", inputs};
   std::vector<fs::path> pack_keeps_off = inputs;
