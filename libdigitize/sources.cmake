@@ -47,7 +47,7 @@ set(DIGITIZE_PHOTOS_SOURCES
   photo_checks.cpp       # camera, light and footprint checks
 )
 
-set(DIGITIZE_BRDF_HEADERS lafortune.h brdf_fit.h tangent_frame.h reflectance_maps.h)
+set(DIGITIZE_BRDF_HEADERS lafortune.h ggx.h brdf_fit.h tangent_frame.h reflectance_maps.h)
 set(DIGITIZE_BRDF_SOURCES
   lafortune.cpp
   reflectance_maps.cpp

@@ -21,6 +21,8 @@
 
 namespace digitize {
 
+inline constexpr double kPi = 3.14159265358979323846;
+
 // ---------------------------------------------------------------------------------------------
 // Failure handling (STYLE.md rule 4): bad input or I/O -> a returned Error naming the file and
 // the problem; a broken invariant -> DIGITIZE_CHECK throws; a fit that does not converge -> data.
