@@ -225,6 +225,12 @@ const char* ToString(ColourEncoding encoding) {
 
 float SrgbToLinear(float encoded) { return static_cast<float>(SrgbToLinearD(encoded)); }
 
+float LinearToSrgb(float linear) {
+  const double a = std::abs(static_cast<double>(linear));
+  const double e = a <= 0.0031308 ? 12.92 * a : 1.055 * std::pow(a, 1.0 / 2.4) - 0.055;
+  return static_cast<float>(linear < 0 ? -e : e);
+}
+
 std::string PhotoLoadSummary::Brief() const {
   char buf[256];
   const double mpx = pixels / 1e6;

@@ -132,6 +132,8 @@ Result<PhotosToFit> ReadPhotosToFit(const Options& options, const ProgressCallba
     if (!held.ok()) return held.error();
     read.held = std::move(held).value();
   }
+  if (!options.held_out_out.empty() && options.held_out.empty())
+    return Error{"--held-out-out " + options.held_out_out + " needs --held-out photos to relight"};
   read.inputs.emplace_back(options.photos);
   for (const Photo& p : read.photos.photos) read.inputs.push_back(p.path);
   if (read.held) {
@@ -139,6 +141,19 @@ Result<PhotosToFit> ReadPhotosToFit(const Options& options, const ProgressCallba
     for (const Photo& p : read.held->photos) read.inputs.push_back(p.path);
   }
   return read;
+}
+
+// The relit held-out photos' folder: what it may not touch (every input and the other outputs).
+FolderOutput RelitFolder(const char* command, std::vector<fs::path> inputs) {
+  return FolderOutput{command, "relit", std::move(inputs)};
+}
+
+Status WriteRelitFolder(const std::string& dir, const FolderOutput& output, const PhotoSet& held,
+                        const std::vector<Grid<Vec3f>>& relit) {
+  if (dir.empty()) return Status::Ok();
+  return WriteDirectoryAtomically(dir, output, [&](const fs::path& tmp) {
+    return WriteRelitImages(tmp, held, relit);
+  });
 }
 
 }  // namespace
@@ -161,15 +176,25 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
   output.inputs.insert(output.inputs.end(), read->inputs.begin(), read->inputs.end());
   if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
+  std::vector<fs::path> relit_keeps_off = output.inputs;
+  relit_keeps_off.emplace_back(options.out);
+  const FolderOutput relit_output = RelitFolder("fit", relit_keeps_off);
+  if (!options.held_out_out.empty()) {
+    if (Status s = CheckFolderOutput(options.held_out_out, relit_output); !s.ok())
+      return Error{s.message()};
+    if (Status s = CheckOutputPath(options.out, {options.held_out_out}); !s.ok())
+      return Error{s.message()};
+  }
 
   Result<PreprocessedCanvas> canvas = LoadFitCanvas(options.canvas, photos);
   if (!canvas.ok()) return canvas.error();
   Result<ReflectanceFitResult> fit = FitReflectance(
       canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
   if (!fit.ok()) return fit.error();
+  std::vector<Grid<Vec3f>> relit;
   if (held) {
-    auto score =
-        EvaluateHeldOut(canvas->field, canvas->normals, fit->maps, canvas->canvas_from_scan, *held);
+    auto score = EvaluateHeldOut(canvas->field, canvas->normals, fit->maps,
+                                 canvas->canvas_from_scan, *held, {}, 1.0, &relit);
     if (!score.ok()) return score.error();
     result.held_out = *score;
   }
@@ -179,6 +204,10 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
     return WriteReflectanceOutputs(dir, *fit, fit_options, inputs);
   });
   if (!written.ok()) return Error{written.message()};
+  if (held) {
+    if (Status s = WriteRelitFolder(options.held_out_out, relit_output, *held, relit); !s.ok())
+      return Error{s.message()};
+  }
   result.fit = std::move(fit->report);
   return result;
 }
@@ -249,6 +278,15 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
     pack_keeps_off.push_back(work / "fit");
   }
   if (Status s = CheckOutputPath(options.out, pack_keeps_off); !s.ok()) return Error{s.message()};
+  std::vector<fs::path> relit_keeps_off = pack_keeps_off;
+  relit_keeps_off.emplace_back(options.out);
+  const FolderOutput relit_output = RelitFolder(kCommand, relit_keeps_off);
+  if (!options.held_out_out.empty()) {
+    if (Status s = CheckFolderOutput(options.held_out_out, relit_output); !s.ok())
+      return Error{s.message()};
+    if (Status s = CheckOutputPath(options.out, {options.held_out_out}); !s.ok())
+      return Error{s.message()};
+  }
 
   // 2. The canvas: preprocessed scans, or for an RTI capture without a scan its flat image grid.
   PreprocessedCanvas canvas;
@@ -301,10 +339,13 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   if (held) {
     auto read = ReadPack(options.out);
     if (!read.ok()) return read.error();
-    auto score =
-        EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan, *held);
+    std::vector<Grid<Vec3f>> relit;
+    auto score = EvaluateHeldOut(read->field, read->normals, read->maps, read->canvas_from_scan,
+                                 *held, {}, 1.0, &relit);
     if (!score.ok()) return score.error();
     result.held_out = *score;
+    if (Status s = WriteRelitFolder(options.held_out_out, relit_output, *held, relit); !s.ok())
+      return Error{s.message()};
   }
   auto summary = InspectPack(options.out);
   if (!summary.ok()) return summary.error();

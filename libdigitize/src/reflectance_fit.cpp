@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
@@ -470,18 +471,50 @@ Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
 namespace digitize {
 
 std::string HeldOutScore::Brief() const {
-  char b[160];
-  std::snprintf(b, sizeof b, "held-out PSNR %.2f dB (RMSE %.4f) over %zu photo(s), %.3g M px",
-                psnr_db, rmse, images.size(), static_cast<double>(pixels) / 1e6);
+  char b[200];
+  std::snprintf(b, sizeof b,
+                "held-out PSNR %.2f dB linear, %.2f dB 8-bit sRGB (RMSE %.4f) over %zu photo(s), "
+                "%.3g M px",
+                psnr_db, psnr_srgb8_db, rmse, images.size(), static_cast<double>(pixels) / 1e6);
   return b;
 }
+
+namespace {
+
+// PSNR of a sum of squared errors over `pixels` RGB pixels; +inf for no error.
+double Psnr(double sse, size_t pixels, double peak) {
+  if (pixels == 0) return 0;
+  const double mse = sse / (3.0 * static_cast<double>(pixels));
+  return mse > 0 ? 10.0 * std::log10(peak * peak / mse) : std::numeric_limits<double>::infinity();
+}
+
+// Sum over the masked pixels and channels of the squared difference of the 8-bit sRGB codes of
+// a / peak and b / peak (both already clipped to [0, peak]).
+double SquaredErrorSrgb8(const Grid<Vec3f>& a, const Grid<Vec3f>& b, const Grid<uint8_t>& mask,
+                         double peak) {
+  const float inv = static_cast<float>(1.0 / peak);
+  auto code = [&](float v) { return std::round(255.0f * LinearToSrgb(v * inv)); };
+  double sse = 0;
+  for (size_t p = 0; p < mask.size(); ++p) {
+    if (!mask.data[p] || !a.data[p].allFinite() || !b.data[p].allFinite()) continue;
+    for (int c = 0; c < 3; ++c) {
+      const double d = code(a.data[p][c]) - code(b.data[p][c]);
+      sse += d * d;
+    }
+  }
+  return sse;
+}
+
+}  // namespace
 
 Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f>& normals,
                                      const ReflectanceMaps& maps,
                                      const RigidTransform& canvas_from_scan,
                                      const PhotoSet& held_out,
-                                     const std::vector<Grid<uint8_t>>& masks, double peak) {
+                                     const std::vector<Grid<uint8_t>>& masks, double peak,
+                                     std::vector<Grid<Vec3f>>* relit_images) {
   const auto start = Clock::now();
+  if (relit_images) relit_images->clear();
   if (!(std::isfinite(peak) && peak > 0))
     return Error{"peak must be > 0, got " + FormatNumber(peak)};
   if (!masks.empty() && masks.size() != held_out.photos.size())
@@ -494,7 +527,7 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
   auto tracer = HeightFieldTracer::Build(canvas);
   if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
   HeldOutScore score;
-  double sse = 0;
+  double sse = 0, sse_srgb8 = 0;
   for (size_t i = 0; i < held_out.photos.size(); ++i) {
     const Photo& photo = held_out.photos[i];
     if (!photo.loaded())
@@ -515,18 +548,54 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
     for (Vec3f& c : a.data) c = c.cwiseMax(0.0f).cwiseMin(top);
     for (Vec3f& c : b.data) c = c.cwiseMax(0.0f).cwiseMin(top);
     const ImageComparison cmp = CompareImages(a, b, mask, peak);
-    score.images.push_back({photo.entry, cmp.psnr_db, cmp.rmse, cmp.pixels});
+    const double image_sse_srgb8 = SquaredErrorSrgb8(a, b, mask, peak);
+    score.images.push_back({photo.entry, cmp.psnr_db, cmp.rmse,
+                            Psnr(image_sse_srgb8, cmp.pixels, 255.0), cmp.pixels});
     sse += cmp.rmse * cmp.rmse * 3.0 * static_cast<double>(cmp.pixels);
+    sse_srgb8 += image_sse_srgb8;
     score.pixels += cmp.pixels;
+    if (relit_images) relit_images->push_back(relit.rgb);
   }
   if (score.pixels > 0) {
     const double mse = sse / (3.0 * static_cast<double>(score.pixels));
     score.rmse = std::sqrt(mse);
-    score.psnr_db =
-        mse > 0 ? 10.0 * std::log10(peak * peak / mse) : std::numeric_limits<double>::infinity();
+    score.psnr_db = Psnr(sse, score.pixels, peak);
+    score.psnr_srgb8_db = Psnr(sse_srgb8, score.pixels, 255.0);
   }
   score.seconds = Since(start);
   return score;
+}
+
+}  // namespace digitize
+
+namespace digitize {
+
+Status WriteRelitImages(const std::filesystem::path& dir, const PhotoSet& held_out,
+                        const std::vector<Grid<Vec3f>>& relit) {
+  if (relit.size() != held_out.photos.size())
+    return Error{"held-out: " + std::to_string(relit.size()) + " relit images for " +
+                 std::to_string(held_out.photos.size()) + " photos"};
+  std::set<std::string> stems;
+  for (size_t i = 0; i < relit.size(); ++i) {
+    const Photo& photo = held_out.photos[i];
+    const std::string stem = photo.path.stem().string();
+    if (!stems.insert(stem).second)
+      return Error{photo.entry + ": " + photo.path.string() + ": a second held-out photo named '" +
+                   stem + "': its relit image would overwrite the first one's"};
+    const Grid<Vec3f>& image = relit[i];
+    if (photo.encoding == ColourEncoding::kLinear) {
+      if (Status s = WriteFloatExr(dir / (stem + ".exr"), image, {"R", "G", "B"}); !s.ok())
+        return s;
+      continue;
+    }
+    Grid<std::array<uint8_t, 3>> codes(image.width, image.height);
+    for (size_t p = 0; p < image.size(); ++p)
+      for (int c = 0; c < 3; ++c)
+        codes.data[p][c] = static_cast<uint8_t>(
+            std::lround(255.0f * LinearToSrgb(std::clamp(image.data[p][c], 0.0f, 1.0f))));
+    if (Status s = WritePngRgb8(dir / (stem + ".png"), codes); !s.ok()) return s;
+  }
+  return Status::Ok();
 }
 
 }  // namespace digitize

@@ -62,8 +62,13 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->required()
       ->transform(FolderPath());
   c->add_option("--held-out", args->fit.held_out,
-                "Calibration JSON of photos NOT fitted: relight them from the maps and print PSNR")
+                "Calibration JSON or .lp of photos NOT fitted: relight them from the maps and "
+                "print PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
+  c->add_option("--held-out-out", args->fit.held_out_out,
+                "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
+                "photos, linear EXR for linear ones)")
+      ->transform(FolderPath());
   c->add_option("--method", args->method,
                 "fast (variable projection) or ceres (ceres::Solve reference)")
       ->check(CLI::IsMember({"fast", "ceres"}))

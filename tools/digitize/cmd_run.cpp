@@ -67,8 +67,13 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
       ->transform(FolderPath());
   c->add_option(
        "--held-out", args->pipeline.held_out,
-       "Calibration JSON of photos NOT fitted: relight them from the written pack, print PSNR")
+       "Calibration JSON or .lp of photos NOT fitted: relight them from the written pack, print "
+       "PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
+  c->add_option("--held-out-out", args->pipeline.held_out_out,
+                "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
+                "photos, linear EXR for linear ones)")
+      ->transform(FolderPath());
   c->add_option("--pixel-pitch-mm", args->pipeline.read.pixel_pitch_mm,
                 "Sample spacing (mm) of depth-only scans")
       ->group("Input");

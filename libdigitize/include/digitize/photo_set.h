@@ -308,6 +308,8 @@ Status LoadPhoto(Photo& photo, const PhotoSetOptions& options = {});
 // sRGB EOTF (IEC 61966-2-1), exact piecewise form: c <= 0.04045 ? c / 12.92
 // : ((c + 0.055) / 1.055)^2.4; odd-symmetric for negative values (extended sRGB).
 float SrgbToLinear(float encoded);
+// Its inverse (the sRGB OETF), same symmetry: what a display shows of a linear value.
+float LinearToSrgb(float linear);
 
 // ---------------------------------------------------------------------------------------------
 // Geometry checks that need the canvas.

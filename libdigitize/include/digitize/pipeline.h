@@ -73,6 +73,7 @@ struct FitFolderOptions {
   std::string canvas;    // a canvas folder; empty: an RTI capture's flat canvas
   std::string photos;    // calibration JSON or RTI .lp
   std::string held_out;  // optional: photos not fitted, relit from the fit
+  std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
   ReflectanceFitOptions fit;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
@@ -87,8 +88,9 @@ struct FitFolderResult {
 
 // Order: options checked; an incomplete canvas folder refused before the photos are loaded (a
 // moment, not a minute); photos read, then the held-out ones (a bad file fails before minutes of
-// work); the folder checked against every input; the canvas; the fit; the held-out score; the
-// folder written (WriteReflectanceOutputs), replaced only on success.
+// work); the folders checked against every input; the canvas; the fit; the held-out score; the
+// folder written (WriteReflectanceOutputs), replaced only on success; the relit held-out photos
+// (WriteRelitImages) into held_out_out, likewise.
 Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
                                     const ProgressCallback& progress = nullptr);
 
@@ -99,6 +101,7 @@ struct PipelineOptions {
   PreprocessOptions preprocess;
   std::string photos;    // calibration JSON or RTI .lp
   std::string held_out;  // optional: photos not fitted, relit from the written pack
+  std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
   ReflectanceFitOptions fit;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor

@@ -121,25 +121,40 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
 // non-zero in the optional per-photo mask (e.g. the generator's frame-shadow masks). Both images
 // are clipped to [0, peak] first -- what a camera or a display shows -- and PSNR uses that peak
 // (1 = the white of an 8-bit photo). The pooled figure is over all compared pixels of all photos.
+// Beside the linear figure, the one RTI tools and viewers show: both images divided by the peak,
+// sRGB-encoded and rounded to 8 bits, PSNR with peak 255 (dark pixels weigh more there, as they
+// do to the eye).
 struct HeldOutImageScore {
   std::string entry;  // the photo's calibration entry
   double psnr_db = 0, rmse = 0;
+  double psnr_srgb8_db = 0;
   size_t pixels = 0;
 };
 struct HeldOutScore {
   std::vector<HeldOutImageScore> images;
   double psnr_db = 0, rmse = 0;  // pooled
+  double psnr_srgb8_db = 0;      // pooled
   size_t pixels = 0;
   double seconds = 0;
-  std::string Brief() const;  // "held-out PSNR 41.3 dB (RMSE 0.0086) over 8 photos, 1.2 M px"
+  // "held-out PSNR 41.3 dB linear, 38.2 dB 8-bit sRGB (RMSE 0.0086) over 8 photos, 1.2 M px"
+  std::string Brief() const;
 };
 // Errors: photos not loaded, masks of the wrong count or size, a tracer build failure.
+// `relit` (optional): each photo's relit image (linear, unclipped, the photo's size), in order.
 Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f>& normals,
                                      const ReflectanceMaps& maps,
                                      const RigidTransform& canvas_from_scan,
                                      const PhotoSet& held_out,
                                      const std::vector<Grid<uint8_t>>& masks = {},
-                                     double peak = 1.0);
+                                     double peak = 1.0,
+                                     std::vector<Grid<Vec3f>>* relit = nullptr);
+
+// Writes each relit held-out photo into `dir` under its photo's file-name stem, in the photo's
+// encoding: 8-bit sRGB PNG for sRGB photos, linear float EXR for linear ones. Errors: sizes or
+// counts that differ, two photos with one stem (the second would overwrite the first), a write
+// error naming the file.
+Status WriteRelitImages(const std::filesystem::path& dir, const PhotoSet& held_out,
+                        const std::vector<Grid<Vec3f>>& relit);
 
 // Reads what WriteReflectanceOutputs wrote (the maps only). Errors name the file: missing,
 // wrong size or channels, a value the maps may not hold.
