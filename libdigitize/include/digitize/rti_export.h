@@ -1,0 +1,2 @@
+#pragma once
+#include "digitize/rti_basis.h"

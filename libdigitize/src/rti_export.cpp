@@ -1,0 +1,2 @@
+// placeholder until the exports land
+#include "digitize/rti_export.h"
