@@ -3,6 +3,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -371,6 +372,87 @@ Result<RtiFit> ReadRelightFolder(const fs::path& dir) {
     }
     return fit;
   });
+}
+
+// ---------------------------------------------------------------------------------------------
+// `digitize rti`
+
+Status RtiRunOptions::Validate() const {
+  if (photos.empty()) return Error{"--photos: an RTI .lp file is required"};
+  if (Status s = fit.Validate(); !s.ok()) return s;
+  if (Status s = photo.Validate(); !s.ok()) return s;
+  if (Status s = relight.Validate(); !s.ok()) return s;
+  if (!ptm.empty() && fit.basis != RtiBasis::kPtm) {
+    return Error{"--ptm " + ptm + ": a .ptm holds the PTM basis, the fit is " +
+                 ToString(fit.basis) + " (use --basis ptm, or --relight-dir for HSH)"};
+  }
+  if ((!ptm.empty() || !relight_dir.empty()) && !fit.fit_in_srgb)
+    return Error{"the .ptm and relight exports hold fits of sRGB codes: drop --linear"};
+  return Status::Ok();
+}
+
+Result<RtiRunResult> RunRti(const RtiRunOptions& options) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  auto photos = ReadRtiCapture(options.photos, options.photo);
+  if (!photos.ok()) return photos.error();
+  std::optional<PhotoSet> held;
+  if (!options.held_out.empty()) {
+    auto h = ReadRtiCapture(options.held_out, options.photo);
+    if (!h.ok()) return h.error();
+    held = std::move(*h);
+  }
+  std::vector<fs::path> inputs = {options.photos};
+  for (const Photo& p : photos->photos) inputs.push_back(p.path);
+  if (held) {
+    inputs.emplace_back(options.held_out);
+    for (const Photo& p : held->photos) inputs.push_back(p.path);
+  }
+  if (!options.ptm.empty())
+    if (Status s = CheckOutputPath(options.ptm, inputs); !s.ok()) return Error{s.message()};
+  RelightFolderOptions folder = options.relight;
+  folder.inputs = inputs;
+  if (!options.relight_dir.empty()) {
+    if (Status s = CheckFolderOutput(options.relight_dir, {"rti", "relight-rti", inputs}); !s.ok())
+      return Error{s.message()};
+  }
+
+  RtiRunResult result;
+  result.photos = static_cast<int>(photos->photos.size());
+  auto fit = FitRti(*photos, options.fit);
+  if (!fit.ok()) return fit.error();
+  result.fit = std::move(*fit);
+  if (held) {
+    const auto t0 = std::chrono::steady_clock::now();
+    Srgb8PsnrAccumulator pooled;
+    const ColourEncoding enc = result.fit.srgb ? ColourEncoding::kSrgb : ColourEncoding::kLinear;
+    for (const Photo& p : held->photos) {
+      const std::string what = p.entry + " (" + p.path.string() + ")";
+      if (p.rgb.width != result.fit.width || p.rgb.height != result.fit.height) {
+        return Error{what + ": " + std::to_string(p.rgb.width) + "x" +
+                     std::to_string(p.rgb.height) + " pixels, the fitted photos have " +
+                     std::to_string(result.fit.width) + "x" + std::to_string(result.fit.height)};
+      }
+      if (!(p.light.direction.z() > 0))
+        return Error{what + ": held-out light at or below the horizon"};
+      const Grid<Vec3f> relit = RelightRti(result.fit, p.light.direction, options.fit.num_threads);
+      Srgb8PsnrAccumulator one;
+      if (Status s = one.Add(relit, enc, p.rgb, ColourEncoding::kLinear, {}, what); !s.ok())
+        return Error{s.message()};
+      if (Status s = pooled.Add(relit, enc, p.rgb, ColourEncoding::kLinear, {}, what); !s.ok())
+        return Error{s.message()};
+      result.held_out_images.push_back({p.entry, one.Score()});
+    }
+    result.held_out = pooled.Score();
+    result.seconds_held_out =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  if (!options.ptm.empty())
+    if (Status s = WritePtm(options.ptm, result.fit, inputs); !s.ok()) return Error{s.message()};
+  if (!options.relight_dir.empty()) {
+    if (Status s = WriteRelightFolder(options.relight_dir, result.fit, folder); !s.ok())
+      return Error{s.message()};
+  }
+  return result;
 }
 
 }  // namespace digitize

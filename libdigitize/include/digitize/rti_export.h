@@ -27,10 +27,12 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "digitize/core.h"
+#include "digitize/photo_set.h"
 #include "digitize/rti_basis.h"
 
 namespace digitize {
@@ -81,5 +83,37 @@ Status WriteRelightFolder(const std::filesystem::path& dir, const RtiFit& fit,
 // planes) back into an RtiFit (srgb, coefficients dequantised into rti_basis.h's order; lights
 // from "lights" when present). Errors name the file and the field.
 Result<RtiFit> ReadRelightFolder(const std::filesystem::path& dir);
+
+// ---------------------------------------------------------------------------------------------
+// `digitize rti`: an RTI capture -> a classical RTI fit, its held-out score, its exports.
+
+struct RtiRunOptions {
+  std::string photos;       // the .lp file fitted
+  std::string held_out;     // optional .lp: relit from the fit and scored (Srgb8PsnrAccumulator)
+  std::string ptm;          // optional .ptm to write (the PTM basis only)
+  std::string relight_dir;  // optional relight / OpenLIME folder to write
+  PhotoSetOptions photo;
+  RtiFitOptions fit;
+  RelightFolderOptions relight;  // its inputs are set here (every input of the run)
+  Status Validate() const;       // photos given; .ptm only with the PTM basis and sRGB; options
+};
+
+struct RtiHeldOutImage {
+  std::string entry;
+  Srgb8Score score;
+};
+struct RtiRunResult {
+  RtiFit fit;
+  int photos = 0;
+  std::vector<RtiHeldOutImage> held_out_images;  // per image (empty without held_out)
+  std::optional<Srgb8Score> held_out;            // pooled
+  double seconds_held_out = 0;                   // relighting + scoring
+};
+
+// Order: options checked; the photos and the held-out photos read (a bad file fails before any
+// work); every output checked against every input (the .lp files and their images) and the
+// relight folder against the folder rules; the fit; the held-out score; the .ptm; the folder.
+// Errors name the file or option.
+Result<RtiRunResult> RunRti(const RtiRunOptions& options);
 
 }  // namespace digitize
