@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "digitize/image_io.h"
 #include "digitize/photo_set.h"
 #include "digitize/rti_export.h"
 #include "test_support.h"
@@ -488,6 +489,56 @@ TEST_F(RtiExport, RelightFolderRoundTrip) {
   ASSERT_TRUE(linear.ok());
   EXPECT_FALSE(WriteRelightFolder(Path("linear"), *linear).ok());
   EXPECT_FALSE(fs::exists(Path("linear")));
+}
+
+// `digitize rti`'s library half on a capture on disk: 12 PNGs whose codes are an HSH3 function of
+// the light (rounded to 8 bits), held out = the fitted photos themselves, so the score measures
+// the fit of rounded data: the fit absorbs 9 of the rounding's 12 degrees of freedom per value,
+// leaving an MSE of 3/12 x 1/12 code^2 (~65 dB); 50 dB leaves room for the clamping to [0, 1].
+// Then the checks made before any work: a .ptm with an HSH basis, outputs onto inputs.
+TEST_F(RtiExport, RunRtiOnFiles) {
+  const auto lights = DomeLights(12);
+  const std::vector<double> truth = RandomCoefficients(RtiBasis::kHsh3, kW * kH, 5);
+  std::string lp = std::to_string(lights.size()) + "\n";
+  for (size_t i = 0; i < lights.size(); ++i) {
+    std::vector<uint8_t> codes(static_cast<size_t>(kW) * kH * 3);
+    for (size_t j = 0; j < codes.size(); ++j)
+      codes[j] = static_cast<uint8_t>(std::lround(
+          255 * std::clamp(Evaluate(RtiBasis::kHsh3, &truth[j * 9], lights[i]), 0.0, 1.0)));
+    const std::string name = "img" + std::to_string(i) + ".png";
+    ASSERT_TRUE(WriteSrgbPng(Path(name), kW, kH, 8, codes.data()).ok());
+    char line[200];
+    std::snprintf(line, sizeof line, "%s %.12f %.12f %.12f\n", name.c_str(), lights[i].x(),
+                  lights[i].y(), lights[i].z());
+    lp += line;
+  }
+  std::ofstream(Path("dirs.lp")) << lp;
+  RtiRunOptions o;
+  o.photos = Path("dirs.lp").string();
+  o.held_out = o.photos;
+  o.fit.basis = RtiBasis::kHsh3;
+  o.relight_dir = Path("out").string();
+  auto r = RunRti(o);
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ASSERT_TRUE(r->held_out.has_value());
+  EXPECT_EQ(r->held_out->images, 12);
+  EXPECT_EQ(r->held_out_images.size(), 12u);
+  EXPECT_GT(r->held_out->psnr_db, 50);
+  EXPECT_TRUE(fs::exists(Path("out") / "info.json"));
+
+  o.ptm = Path("out.ptm").string();
+  auto bad = RunRti(o);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("--basis ptm"), std::string::npos) << bad.error().message;
+  o.fit.basis = RtiBasis::kPtm;
+  o.ptm = Path("img3.png").string();  // an input
+  o.relight_dir.clear();
+  auto onto = RunRti(o);
+  ASSERT_FALSE(onto.ok());
+  EXPECT_TRUE(fs::exists(Path("img3.png")));
+  o.ptm.clear();
+  o.relight_dir = dir_.string();  // the folder holding the inputs
+  EXPECT_FALSE(RunRti(o).ok());
 }
 
 // The real capture, split as the project evaluates RTI (every 4th image from index 3 held out),
