@@ -1,4 +1,4 @@
-// The classical RTI bases against `digitize` on a real capture (docs/benchmarks.md): the
+// The classical RTI bases against `digitize` on a real capture (results: docs/bench_rti.txt): the
 // hand-held RTI capture in shared/data/rti_icon (72 JPEGs + dirs.lp), split as the project
 // evaluates RTI -- every 4th image from index 3 (0-based: 3, 7, 11, ...) held out, the rest
 // fitted -- and each held-out light relit from the fit. Per row: fit time, relight time (all
