@@ -39,12 +39,14 @@ set(DIGITIZE_PREPROCESS_SOURCES
   preprocess.cpp
 )
 
-set(DIGITIZE_PHOTOS_HEADERS photo_set.h)
+set(DIGITIZE_PHOTOS_HEADERS photo_set.h rti_basis.h rti_export.h)
 set(DIGITIZE_PHOTOS_SOURCES
   photo_calibration.cpp  # calibration JSON: transforms, cameras, lights
   rti_lp.cpp             # RTI .lp light files
   photo_pixels.cpp       # image headers, pixels, colour
   photo_checks.cpp       # camera, light and footprint checks
+  rti_basis.cpp          # PTM / HSH per-pixel fits, relighting, 8-bit sRGB PSNR
+  rti_export.cpp         # .ptm (RTIViewer) and relight's info.json + plane_N.jpg (OpenLIME)
 )
 
 set(DIGITIZE_BRDF_HEADERS lafortune.h ggx.h brdf_fit.h tangent_frame.h reflectance_maps.h)

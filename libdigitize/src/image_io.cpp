@@ -512,3 +512,17 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
 }
 
 }  // namespace digitize
+
+namespace digitize {
+
+Status WriteJpegRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image, int quality) {
+  CheckStorage(image);
+  if (quality < 1 || quality > 100)
+    return Error{path.string() + ": JPEG quality must be 1-100, got " + std::to_string(quality)};
+  OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
+  spec.attribute("Compression", "jpeg:" + std::to_string(quality));
+  spec.attribute("jpeg:subsampling", "4:4:4");
+  return WritePixels(path, "jpeg", spec, image.data.data());
+}
+
+}  // namespace digitize

@@ -23,6 +23,7 @@ void AddPackCommand(CLI::App& app, int& exit_code);
 void AddInspectCommand(CLI::App& app, int& exit_code);
 void AddVerifyCommand(CLI::App& app, int& exit_code);
 void AddRunCommand(CLI::App& app, int& exit_code);
+void AddRtiCommand(CLI::App& app, int& exit_code);
 
 // --- shared by several commands (cli_common.cpp) ---
 

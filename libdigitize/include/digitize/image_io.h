@@ -104,3 +104,13 @@ Result<FloatImage> ReadImage(const std::filesystem::path& path,
                              size_t max_pixels = size_t{1} << 28);
 
 }  // namespace digitize
+
+namespace digitize {
+
+// 8-bit RGB JPEG at `quality` (1-100) with full-resolution chroma (4:4:4): for images whose
+// channels are independent data (RTI coefficient planes), which chroma subsampling would blur
+// into each other. Values written as they are, no colour space.
+Status WriteJpegRgb8(const std::filesystem::path& path, const Grid<std::array<uint8_t, 3>>& image,
+                     int quality);
+
+}  // namespace digitize
