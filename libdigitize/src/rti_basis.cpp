@@ -109,7 +109,6 @@ Status RtiFitOptions::Validate() const {
   return Status::Ok();
 }
 
-float LinearToSrgb(float linear) { return static_cast<float>(LinearToSrgbD(linear)); }
 
 uint8_t ToSrgb8(float value, ColourEncoding encoding) {
   double v = std::isfinite(value) ? std::clamp(static_cast<double>(value), 0.0, 1.0) : 0.0;

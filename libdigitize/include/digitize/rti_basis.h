@@ -98,10 +98,6 @@ Result<RtiFit> FitRti(const PhotoSet& photos, const RtiFitOptions& options = {})
 // to [0, 1], IN THE FIT'S ENCODING (sRGB codes / 255 when fit.srgb, else linear).
 Grid<Vec3f> RelightRti(const RtiFit& fit, const Vec3d& light, int num_threads = 0);
 
-// sRGB OETF, the exact inverse of SrgbToLinear (photo_set.h): c <= 0.0031308 ? 12.92 c
-// : 1.055 c^(1/2.4) - 0.055; odd-symmetric for negative values.
-float LinearToSrgb(float linear);
-
 // ---------------------------------------------------------------------------------------------
 // PSNR over 8-bit sRGB codes, pooled: every image is turned into codes round(255 * sRGB(clamp(v,
 // 0, 1))) (its own encoding says whether v is sRGB already or linear: a photo loaded as linear
