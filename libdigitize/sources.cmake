@@ -75,7 +75,8 @@ set(DIGITIZE_PACK_SOURCES
   provenance.cpp   # where a pack came from, and its JSON form
 )
 
-set(DIGITIZE_PIPELINE_HEADERS pipeline.h)
+set(DIGITIZE_PIPELINE_HEADERS pipeline.h rti_canvas.h)
 set(DIGITIZE_PIPELINE_SOURCES
   pipeline.cpp     # scan -> canvas -> fit -> pack, as the commands run it
+  rti_canvas.cpp   # an RTI capture -> intensities, normals, height, relief
 )

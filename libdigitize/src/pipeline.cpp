@@ -162,6 +162,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
                                     const ProgressCallback& progress) {
   if (Status s = options.photo.Validate(); !s.ok()) return Error{s.message()};
   if (Status s = options.fit.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = options.rti.Validate(); !s.ok()) return Error{s.message()};
   if (!options.canvas.empty())
     if (Status s = CheckCanvasFolder(options.canvas); !s.ok()) return Error{s.message()};
 
@@ -171,7 +172,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   result.photos = std::move(read->photos);
   const PhotoSet& photos = result.photos;
   const ReflectanceFitOptions& fit_options = read->fit;
-  const std::optional<PhotoSet>& held = read->held;
+  std::optional<PhotoSet>& held = read->held;
   FolderOutput output{"fit", "fit", {}};
   if (!options.canvas.empty()) output.inputs.emplace_back(options.canvas);
   output.inputs.insert(output.inputs.end(), read->inputs.begin(), read->inputs.end());
@@ -186,7 +187,17 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
       return Error{s.message()};
   }
 
-  Result<PreprocessedCanvas> canvas = LoadFitCanvas(options.canvas, photos);
+  Result<PreprocessedCanvas> canvas = PreprocessedCanvas{};
+  if (options.canvas.empty() && photos.is_rti) {
+    auto rti = RtiCanvasFor(result.photos, options.rti, progress);
+    if (!rti.ok()) return rti.error();
+    canvas = rti->canvas;
+    if (held)
+      ApplyPredictedIntensities(photos, rti->intensities, options.rti.intensity_kernel_deg, *held);
+    result.rti = std::move(rti).value();
+  } else {
+    canvas = LoadFitCanvas(options.canvas, photos);
+  }
   if (!canvas.ok()) return canvas.error();
   Result<ReflectanceFitResult> fit = FitReflectance(
       canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
@@ -213,7 +224,8 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
 }
 
 Status PipelineOptions::Validate() const {
-  for (const Status& s : {pack.Validate(), photo.Validate(), fit.Validate(), preprocess.Validate()})
+  for (const Status& s : {pack.Validate(), photo.Validate(), rti.Validate(), fit.Validate(),
+                          preprocess.Validate()})
     if (!s.ok()) return s;
   return Status::Ok();
 }
@@ -226,7 +238,8 @@ namespace {
 // size rests on it).
 Result<PackProvenance> RunProvenance(const PipelineOptions& options, const PhotoSet& set,
                                      const ReflectanceFitOptions& fit_options,
-                                     const ReflectanceFitReport& fit) {
+                                     const ReflectanceFitReport& fit,
+                                     const std::optional<RtiCanvas>& rti) {
   PackProvenance provenance = NewProvenance();
   std::vector<fs::path> files(options.scans.begin(), options.scans.end());
   files.emplace_back(options.photos);
@@ -243,6 +256,12 @@ Result<PackProvenance> RunProvenance(const PipelineOptions& options, const Photo
     stages["fit"]["rti_pitch"] = {{"mm", set.rti_pitch_mm},
                                   {"source", set.rti_pitch_source},
                                   {"assumed", set.rti_pitch_assumed}};
+  if (rti)
+    stages["rti"] = {{"normals", options.rti.normals},
+                     {"height", options.rti.height},
+                     {"intensity_kernel_deg", options.rti.intensity_kernel_deg},
+                     {"intensities", rti->intensities},
+                     {"brief", rti->Brief()}};
   provenance.options_json = stages.dump();
   return provenance;
 }
@@ -261,7 +280,7 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   result.photos = std::move(read->photos);
   const PhotoSet& photos = result.photos;
   const ReflectanceFitOptions& fit_options = read->fit;
-  const std::optional<PhotoSet>& held = read->held;
+  std::optional<PhotoSet>& held = read->held;
 
   // Every file read is an input no output may touch; --work holds only its own canvas/ and fit/.
   std::vector<fs::path> inputs(options.scans.begin(), options.scans.end());
@@ -299,9 +318,12 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
     result.preprocessed = std::move(r).value();
     canvas = CanvasFromPreprocess(*result.preprocessed);
   } else if (photos.is_rti) {
-    auto flat = FlatCanvasFor(photos);
-    if (!flat.ok()) return flat.error();
-    canvas = std::move(flat).value();
+    auto rti = RtiCanvasFor(result.photos, options.rti, progress);
+    if (!rti.ok()) return rti.error();
+    canvas = rti->canvas;
+    if (held)
+      ApplyPredictedIntensities(photos, rti->intensities, options.rti.intensity_kernel_deg, *held);
+    result.rti = std::move(rti).value();
   } else {
     return Error{"a scan is required with a calibration file (" + options.photos +
                  "); only an RTI capture (.lp) can be packed on a flat canvas without one"};
@@ -314,7 +336,7 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   result.fit = fit->report;
 
   // 4. Pack, with provenance.
-  auto provenance = RunProvenance(options, photos, fit_options, fit->report);
+  auto provenance = RunProvenance(options, photos, fit_options, fit->report, result.rti);
   if (!provenance.ok()) return provenance.error();
   if (!options.work.empty()) {
     const std::vector<std::string> photo_inputs = {options.photos};

@@ -62,6 +62,21 @@ void AddPhotoSetFlags(CLI::App* c, PhotoSetOptions& o) {
       ->group("Photos");
 }
 
+void AddRtiCanvasFlags(CLI::App* c, RtiCanvasOptions& o) {
+  c->add_flag("--rti-flat{false}", o.normals,
+              "RTI captures: fit on the flat canvas with normals straight up (no photometric "
+              "stereo, no height; the paper's RTI path)")
+      ->group("RTI");
+  c->add_flag("--rti-no-height{false}", o.height,
+              "RTI captures: keep the photometric-stereo normals but no height field (no relief, "
+              "no cast shadows)")
+      ->group("RTI");
+  c->add_flag("--rti-no-intensities{false}", o.stereo.estimate_intensities,
+              "RTI captures: take every light at the same intensity instead of estimating each "
+              "image's from the capture (for calibrated domes)")
+      ->group("RTI");
+}
+
 ScanReadOptions ScanReadOptionsOf(ScanReadOptions read, const std::string& mask,
                                   const std::vector<int>& grid) {
   read.mask = mask;

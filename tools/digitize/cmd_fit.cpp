@@ -114,6 +114,7 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->group("Photos");
   AddPhotoSetFlags(c, args->fit.photo);
+  AddRtiCanvasFlags(c, args->fit.rti);
   c->add_option("--tile-texels", args->fit.fit.tile_texels,
                 "Texels sampled and fitted at a time (memory: ~ tile x photos x 48 bytes)")
       ->capture_default_str()

@@ -104,6 +104,7 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
           ->capture_default_str()
           ->group("Fit");
   AddPhotoSetFlags(c, args->pipeline.photo);
+  AddRtiCanvasFlags(c, args->pipeline.rti);
   c->add_option("--threads", args->threads, "Worker threads (0 = all cores)")
       ->capture_default_str()
       ->group("Performance");

@@ -37,6 +37,8 @@ void PrintPackSummaryLine(const std::string& path, const PackSummary& summary);
 void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quantised);
 // Photo-set flags (--rti-pitch-mm, --allow-outside-paths) shared by fit and run.
 void AddPhotoSetFlags(CLI::App* command, PhotoSetOptions& options);
+// --rti-flat, --rti-no-height, --rti-no-intensities: how an RTI capture becomes a canvas.
+void AddRtiCanvasFlags(CLI::App* command, RtiCanvasOptions& options);
 // The scan input flags (--mask, --grid WIDTH HEIGHT) folded into the read options.
 ScanReadOptions ScanReadOptionsOf(ScanReadOptions read, const std::string& mask,
                                   const std::vector<int>& grid);

@@ -14,6 +14,7 @@
 #include "digitize/photo_set.h"
 #include "digitize/preprocess.h"
 #include "digitize/reflectance_fit.h"
+#include "digitize/rti_canvas.h"
 #include "digitize/scan_io.h"
 
 namespace digitize {
@@ -75,6 +76,7 @@ struct FitFolderOptions {
   std::string held_out;  // optional: photos not fitted, relit from the fit
   std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
+  RtiCanvasOptions rti;  // an RTI capture without a canvas: its normals, height, intensities
   ReflectanceFitOptions fit;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
   std::string out;                         // the fit folder
@@ -82,6 +84,7 @@ struct FitFolderOptions {
 
 struct FitFolderResult {
   PhotoSet photos;
+  std::optional<RtiCanvas> rti;  // an RTI capture fitted without a canvas
   ReflectanceFitReport fit;
   std::optional<HeldOutScore> held_out;
 };
@@ -103,6 +106,7 @@ struct PipelineOptions {
   std::string held_out;  // optional: photos not fitted, relit from the written pack
   std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
+  RtiCanvasOptions rti;  // an RTI capture without a scan: its normals, height, intensities
   ReflectanceFitOptions fit;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
   PackWriteOptions pack;
@@ -114,6 +118,7 @@ struct PipelineOptions {
 
 struct PipelineResult {
   std::optional<PreprocessResult> preprocessed;  // empty for an RTI capture without a scan
+  std::optional<RtiCanvas> rti;                  // an RTI capture without a scan
   PhotoSet photos;
   ReflectanceFitReport fit;
   std::optional<HeldOutScore> held_out;  // relit from the pack as written (what a user gets)
