@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numeric>
 
 namespace digitize {
@@ -29,16 +30,22 @@ constexpr double kMinTiltNz = 0.3;
 // Per-pixel working buffers (one per task: no allocation per pixel).
 struct PixelScratch {
   std::vector<double> g;        // grey / (e_i s_i)
+  std::vector<double> scale;    // e_i s_i
+  std::vector<Vec3f> rgb;       // the pixel's colour in each image
   std::vector<Vec3d> l;         // unit light direction at the pixel
   std::vector<uint8_t> usable;  // not excluded
   std::vector<uint8_t> inlier;
+  std::vector<uint8_t> next;  // the reselection's candidate inliers
   std::vector<int> order;
   std::vector<double> tmp;
   void Resize(size_t n) {
     g.resize(n);
+    scale.resize(n);
+    rgb.resize(n);
     l.resize(n);
     usable.resize(n);
     inlier.resize(n);
+    next.resize(n);
     order.resize(n);
     tmp.resize(n);
   }
@@ -52,25 +59,41 @@ struct PixelFit {
   PhotometricStatus status = PhotometricStatus::kOk;
 };
 
-// Least squares b over the samples marked in `use`; false when the lights do not constrain it.
-bool SolveLs(const PixelScratch& s, const std::vector<uint8_t>& use, double min_spread, Vec3d* b,
-             int* count) {
-  Mat3d a = Mat3d::Zero();
+// Least squares b over the samples marked in `use` (false when fewer than 3 or singular); `a` gets
+// the normal matrix sum l l^T / count for the spread test.
+bool SolveLs(const PixelScratch& s, const std::vector<uint8_t>& use, Vec3d* b, int* count,
+             Mat3d* a_mean) {
+  double xx = 0, xy = 0, xz = 0, yy = 0, yz = 0, zz = 0;
   Vec3d r = Vec3d::Zero();
   int k = 0;
   for (size_t i = 0; i < s.g.size(); ++i) {
     if (!use[i]) continue;
-    a.noalias() += s.l[i] * s.l[i].transpose();
-    r += s.g[i] * s.l[i];
+    const Vec3d& l = s.l[i];
+    xx += l.x() * l.x(), xy += l.x() * l.y(), xz += l.x() * l.z();
+    yy += l.y() * l.y(), yz += l.y() * l.z(), zz += l.z() * l.z();
+    r += s.g[i] * l;
     ++k;
   }
   *count = k;
   if (k < 3) return false;
-  Eigen::SelfAdjointEigenSolver<Mat3d> eig;
-  eig.computeDirect(a / k, Eigen::EigenvaluesOnly);
-  if (!(eig.eigenvalues()(0) >= min_spread)) return false;
-  *b = a.ldlt().solve(r);
+  Mat3d a;
+  a << xx, xy, xz, xy, yy, yz, xz, yz, zz;
+  *a_mean = a / k;
+  Eigen::LDLT<Mat3d> ldlt(a);
+  if (ldlt.info() != Eigen::Success) return false;
+  *b = ldlt.solve(r);
   return b->allFinite();
+}
+
+// Whether the lights of a normal matrix constrain a normal: its smallest eigenvalue.
+bool Spread(const Mat3d& a_mean, double min_spread) {
+  // Fast path: lambda_min = det / (lambda_1 lambda_2) >= det / (trace / 2)^2, so a large enough
+  // determinant proves the spread without the eigenvalues (nearly every pixel of a capture).
+  const double tr = a_mean.trace();
+  if (tr > 0 && a_mean.determinant() / (0.25 * tr * tr) >= min_spread) return true;
+  Eigen::SelfAdjointEigenSolver<Mat3d> eig;
+  eig.computeDirect(a_mean, Eigen::EigenvaluesOnly);
+  return eig.eigenvalues()(0) >= min_spread;
 }
 
 double Median(std::vector<double>& v, size_t n) {
@@ -106,32 +129,41 @@ PixelFit FitPixel(PixelScratch& s, const PhotometricStereoOptions& o) {
     fit.status = PhotometricStatus::kBlack;
     return fit;
   }
-  // Step 1: rank trimming.
-  std::sort(s.order.begin(), s.order.begin() + static_cast<std::ptrdiff_t>(n_usable),
-            [&](int a, int b) { return s.g[a] < s.g[b]; });
+  // Step 1: rank trimming, by the order statistics of a copy of the usable values.
+  for (size_t r = 0; r < n_usable; ++r) s.tmp[r] = s.g[s.order[r]];
+  auto begin = s.tmp.begin();
+  auto at = [&](size_t rank) {
+    std::nth_element(begin, begin + static_cast<std::ptrdiff_t>(rank),
+                     begin + static_cast<std::ptrdiff_t>(n_usable));
+    return s.tmp[rank];
+  };
   const size_t lo = static_cast<size_t>(std::floor(o.low_quantile * n_usable));
   const size_t hi = std::max(lo + 1, static_cast<size_t>(std::ceil(o.high_quantile * n_usable)));
-  const double median = s.g[s.order[n_usable / 2]];
-  const double floor_g = o.shadow_ratio * median;
-  for (size_t r = lo; r < std::min(hi, n_usable); ++r) {
+  const double median = at(n_usable / 2);
+  const double floor_g = std::max(at(std::min(lo, n_usable - 1)), o.shadow_ratio * median);
+  // Samples from rank hi up are dropped: every value above the hi-th (ties kept, as ranks are).
+  const double ceil_g = hi < n_usable ? at(hi) : std::numeric_limits<double>::infinity();
+  for (size_t r = 0; r < n_usable; ++r) {
     const int i = s.order[r];
-    if (s.g[i] >= floor_g) s.inlier[i] = 1;
+    if (s.g[i] >= floor_g && s.g[i] < ceil_g) s.inlier[i] = 1;
   }
   Vec3d b;
+  Mat3d a_mean;
   int count = 0;
-  if (!SolveLs(s, s.inlier, o.min_light_spread, &b, &count)) {
+  if (!SolveLs(s, s.inlier, &b, &count, &a_mean) || !Spread(a_mean, o.min_light_spread)) {
     fit.status = count < o.min_inliers && n_usable >= 3 ? PhotometricStatus::kTooFewInliers
                                                         : PhotometricStatus::kDegenerate;
     // Two images, or lights that are all equal, are degenerate whatever the trimming left.
     int all = 0;
     Vec3d unused;
-    if (!SolveLs(s, s.usable, o.min_light_spread, &unused, &all)) {
+    Mat3d a_all;
+    if (!SolveLs(s, s.usable, &unused, &all, &a_all) || !Spread(a_all, o.min_light_spread)) {
       fit.status = PhotometricStatus::kDegenerate;
     }
     fit.inliers = count;
     return fit;
   }
-  // Step 2: reselection by shading and residual.
+  // Step 2: reselection by shading and residual, until the inliers stop changing.
   for (int it = 0; it < o.reselect_iterations; ++it) {
     const double albedo = b.norm();
     if (!(albedo > 0)) break;
@@ -142,13 +174,18 @@ PixelFit FitPixel(PixelScratch& s, const PhotometricStereoOptions& o) {
     }
     const double sigma = std::max(kMadToSigma * Median(s.tmp, k), o.noise_floor * albedo);
     const double limit = o.outlier_sigmas * sigma;
+    bool changed = false;
     for (size_t i = 0; i < m; ++i) {
-      s.inlier[i] = s.usable[i] && n.dot(s.l[i]) >= o.min_shading &&
-                    std::abs(s.g[i] - b.dot(s.l[i])) <= limit;
+      s.next[i] = s.usable[i] && n.dot(s.l[i]) >= o.min_shading &&
+                  std::abs(s.g[i] - b.dot(s.l[i])) <= limit;
+      changed |= s.next[i] != s.inlier[i];
     }
+    if (!changed) break;
     Vec3d nb;
-    if (!SolveLs(s, s.inlier, o.min_light_spread, &nb, &count)) break;
+    Mat3d na;
+    if (!SolveLs(s, s.next, &nb, &count, &na) || !Spread(na, o.min_light_spread)) break;
     b = nb;
+    s.inlier.swap(s.next);
   }
   // Final inlier set of b (the last reselection may have failed to solve).
   int k = 0;
@@ -199,19 +236,10 @@ void Gather(const Setup& st, int x, int y, PixelScratch& s) {
       s.l[i] = im.light;
     }
     s.g[i] = (static_cast<double>(c.x()) + c.y() + c.z()) / 3.0 / scale;
+    s.scale[i] = scale;
+    s.rgb[i] = c;
     s.usable[i] = !(im.exclude && !im.exclude->empty() && (*im.exclude)(x, y) != 0);
   }
-}
-
-// Shading factor (e_i s_i) of sample i at the pixel of the last Gather.
-double SampleScale(const Setup& st, const PixelScratch& s, size_t i, int x, int y) {
-  const auto& im = (*st.images)[i];
-  if (!im.point_light) return st.e[i];
-  const double pitch = st.options->pitch_mm;
-  const Vec3d p((x + 0.5) * pitch, (st.height - y - 0.5) * pitch, 0.0);
-  const double ratio = st.centre_distance[i] / (im.light - p).norm();
-  (void)s;
-  return st.e[i] * ratio * ratio;
 }
 
 // One alternation round on the subsample: new intensities (mean 1). Returns false when no image
@@ -244,8 +272,8 @@ bool UpdateIntensities(Setup& st) {
           const double shading = fit.n.dot(s.l[i]);
           if (shading < o.min_intensity_shading) continue;
           // g_i was divided by e_i s_i; the raw grey over the model's shading without e.
-          const double raw = s.g[i] * SampleScale(st, s, i, x, y);
-          const double model = fit.b.dot(s.l[i]) * SampleScale(st, s, i, x, y) / st.e[i];
+          const double raw = s.g[i] * s.scale[i];
+          const double model = fit.b.dot(s.l[i]) * s.scale[i] / st.e[i];
           if (model > 0) out[i].push_back(static_cast<float>(raw / model));
         }
       }
@@ -460,8 +488,7 @@ Result<PhotometricStereoResult> SolvePhotometricStereo(const std::vector<Photome
             if (ok ? !s.inlier[i] : !s.usable[i]) continue;
             const double shading = n.dot(s.l[i]);
             if (shading <= 0) continue;
-            const double scale = SampleScale(st, s, i, x, y);
-            num += (*lights[i].rgb)(x, y).cast<double>() / scale * shading;
+            num += s.rgb[i].cast<double>() / s.scale[i] * shading;
             den += shading * shading;
           }
           const Vec3d a = den > 0 ? Vec3d((num / den).cwiseMax(0.0)) : Vec3d::Zero();
