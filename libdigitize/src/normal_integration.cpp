@@ -2,6 +2,7 @@
 // or Frankot-Chellappa with OpenCV's DFT on the mirror-padded grid.
 #include "digitize/normal_integration.h"
 
+#include <Eigen/IterativeLinearSolvers>
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
@@ -69,10 +70,15 @@ double GradientResidual(const Grid<float>& z, const std::vector<double>& gx,
   return n ? std::sqrt(sse / static_cast<double>(n)) : 0.0;
 }
 
+Grid<float> SolveFrankotChellappa(int w, int h, const std::vector<double>& gx,
+                                  const std::vector<double>& gy);
+
 Result<Grid<float>> SolvePoisson(int w, int h, const std::vector<double>& gx,
                                  const std::vector<double>& gy, const Grid<uint8_t>* mask,
                                  const Grid<float>* weights,
-                                 const NormalIntegrationOptions& options) {
+                                 const NormalIntegrationOptions& options,
+                                 const std::vector<float>& initial, int* iterations,
+                                 bool* converged) {
   const size_t n = static_cast<size_t>(w) * static_cast<size_t>(h);
   std::vector<Eigen::Triplet<double>> triplets;
   triplets.reserve(n * 5);
@@ -113,14 +119,37 @@ Result<Grid<float>> SolvePoisson(int w, int h, const std::vector<double>& gx,
   Eigen::SparseMatrix<double> a(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
   a.setFromTriplets(triplets.begin(), triplets.end());
   triplets = {};
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
-  solver.compute(a);
-  if (solver.info() != Eigen::Success)
-    return Error{"normal integration: the Poisson system could not be factorised (" +
-                 std::to_string(w) + "x" + std::to_string(h) + ")"};
-  const Eigen::VectorXd z = solver.solve(rhs);
-  if (solver.info() != Eigen::Success || !z.allFinite())
-    return Error{"normal integration: the Poisson solve failed"};
+  Eigen::VectorXd z;
+  if (n <= options.max_direct_pixels) {
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
+    solver.compute(a);
+    if (solver.info() != Eigen::Success)
+      return Error{"normal integration: the Poisson system could not be factorised (" +
+                   std::to_string(w) + "x" + std::to_string(h) + ")"};
+    z = solver.solve(rhs);
+    if (solver.info() != Eigen::Success || !z.allFinite())
+      return Error{"normal integration: the Poisson solve failed"};
+  } else {
+    // Too large to factorise (the fill-in of a 2D Laplacian grows as n log n): preconditioned
+    // conjugate gradients from the Frankot-Chellappa heights, which are close everywhere but at
+    // the mask's edges.
+    Eigen::ConjugateGradient<Eigen::SparseMatrix<double>, Eigen::Lower | Eigen::Upper,
+                             Eigen::IncompleteCholesky<double>>
+        cg;
+    cg.setTolerance(options.cg_tolerance);
+    cg.setMaxIterations(options.cg_max_iterations);
+    cg.compute(a);
+    if (cg.info() != Eigen::Success)
+      return Error{"normal integration: the Poisson preconditioner failed (" + std::to_string(w) +
+                   "x" + std::to_string(h) + ")"};
+    Eigen::VectorXd guess(static_cast<Eigen::Index>(n));
+    for (size_t i = 0; i < n; ++i) guess[static_cast<Eigen::Index>(i)] = initial[i];
+    guess.array() -= guess[0];  // the pinned gauge z_0 = 0
+    z = cg.solveWithGuess(rhs, guess);
+    *iterations = static_cast<int>(cg.iterations());
+    *converged = cg.info() == Eigen::Success;
+    if (!z.allFinite()) return Error{"normal integration: the Poisson solve diverged"};
+  }
   Grid<float> out(w, h);
   for (size_t i = 0; i < n; ++i) out.data[i] = static_cast<float>(z[static_cast<Eigen::Index>(i)]);
   return out;
@@ -176,6 +205,10 @@ Status NormalIntegrationOptions::Validate() const {
     return Error{"min_nz must be in (0, 1], got " + FormatNumber(min_nz)};
   if (!(std::isfinite(membrane_weight) && membrane_weight > 0))
     return Error{"membrane_weight must be > 0, got " + FormatNumber(membrane_weight)};
+  if (!(std::isfinite(cg_tolerance) && cg_tolerance > 0))
+    return Error{"cg_tolerance must be > 0, got " + FormatNumber(cg_tolerance)};
+  if (cg_max_iterations < 1)
+    return Error{"cg_max_iterations must be >= 1, got " + std::to_string(cg_max_iterations)};
   return Status::Ok();
 }
 
@@ -183,7 +216,11 @@ std::string NormalIntegrationResult::Brief() const {
   char b[160];
   std::snprintf(b, sizeof b, "%s %dx%d: residual %.4g; %.2f s", ToString(method), height_mm.width,
                 height_mm.height, rms_gradient_residual, seconds);
-  return b;
+  std::string out = b;
+  if (cg_iterations > 0)
+    out += " (" + std::to_string(cg_iterations) + " CG iterations" +
+           (converged ? ")" : ", not converged)");
+  return out;
 }
 
 Result<NormalIntegrationResult> IntegrateNormals(const Grid<Vec3f>& normals, double pitch_mm,
@@ -215,7 +252,11 @@ Result<NormalIntegrationResult> IntegrateNormals(const Grid<Vec3f>& normals, dou
   NormalIntegrationResult result;
   result.method = options.method;
   if (options.method == NormalIntegrationMethod::kPoisson) {
-    auto z = SolvePoisson(w, h, gx, gy, mask, weights, options);
+    const size_t n = normals.size();
+    std::vector<float> initial;
+    if (n > options.max_direct_pixels) initial = SolveFrankotChellappa(w, h, gx, gy).data;
+    auto z = SolvePoisson(w, h, gx, gy, mask, weights, options, initial, &result.cg_iterations,
+                          &result.converged);
     if (!z.ok()) return z.error();
     result.height_mm = std::move(*z);
   } else {

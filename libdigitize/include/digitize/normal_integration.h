@@ -42,7 +42,13 @@ struct NormalIntegrationOptions {
   double min_nz = 0.1;            // n_z clamp before the gradients are taken
   double membrane_weight = 1e-3;  // Poisson: weight of pairs without gradient data (and of
                                   // pairs whose weights are 0), relative to full-weight pairs
-  Status Validate() const;        // min_nz in (0, 1], membrane_weight > 0
+  // Poisson: grids up to this many pixels are factorised (SimplicialLDLT: exact, ~1 s CPU per
+  // 0.2 Mpx; memory grows as n log n); larger ones are solved by conjugate gradients
+  // (IncompleteCholesky preconditioner) from the Frankot-Chellappa heights.
+  size_t max_direct_pixels = size_t{1} << 21;
+  double cg_tolerance = 1e-6;  // relative residual
+  int cg_max_iterations = 2000;
+  Status Validate() const;  // min_nz in (0, 1], membrane_weight > 0, cg_* > 0
 };
 
 struct NormalIntegrationResult {
@@ -51,6 +57,9 @@ struct NormalIntegrationResult {
   // RMS over the data pairs of (height step / pitch - gradient): how far the normals are from
   // integrable (0 for normals of a height field, up to discretisation).
   double rms_gradient_residual = 0;
+  int cg_iterations = 0;  // Poisson by conjugate gradients: iterations done (0: factorised)
+  bool converged = true;  // false: CG stopped at cg_max_iterations (the heights are usable,
+                          // less exact)
   double seconds = 0;
   std::string Brief() const;  // "poisson 400x300: residual 0.012; 0.31 s"
 };
