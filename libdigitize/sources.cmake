@@ -28,10 +28,14 @@ set(DIGITIZE_CANVAS_SOURCES
   mask_ops.cpp    # OpenCV morphology shared by canvas.cpp and resample.cpp
 )
 
-set(DIGITIZE_RELIEF_HEADERS relief.h normals.h)
+set(DIGITIZE_RELIEF_HEADERS relief.h normals.h photometric_stereo.h normal_integration.h
+  sphere_calibration.h)
 set(DIGITIZE_RELIEF_SOURCES
   relief.cpp      # OpenCV connected components
   normals.cpp
+  photometric_stereo.cpp  # robust per-pixel normals, albedo and light intensities
+  normal_integration.cpp  # height from normals: Eigen sparse Poisson, OpenCV DFT Frankot-Chellappa
+  sphere_calibration.cpp  # OpenCV HoughCircles: light directions from a reflective sphere
 )
 
 set(DIGITIZE_PREPROCESS_HEADERS preprocess.h)

@@ -6,6 +6,7 @@
 #include "digitize/output_dir.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/photo_sim.h"
+#include "digitize_synth/rti_sim.h"
 #include "digitize_synth/scan_sim.h"
 #include "digitize_synth/synth_io.h"
 #include "progress_bar.h"
@@ -27,6 +28,10 @@ struct SynthArgs {
   bool photos = false, measured = false;
   synth::PhotoSimOptions photo;
   std::string photo_encoding = "srgb8";
+  // RTI capture (--rti).
+  bool rti = false;
+  synth::RtiSimOptions rti_options;
+  std::string rti_encoding = "srgb8";
 };
 
 int RunSynth(SynthArgs args) {
@@ -52,6 +57,9 @@ int RunSynth(SynthArgs args) {
     args.scan.offset_mm = Vec3d(args.offset[0], args.offset[1], args.scan.offset_mm.z());
   args.scan.seed = args.painting.seed;
   args.photo.seed = args.painting.seed;
+  args.rti_options.seed = args.painting.seed;
+  args.rti_options.encoding =
+      args.rti_encoding == "exr" ? synth::RtiEncoding::kLinearFloat : synth::RtiEncoding::kSrgb8;
   args.photo.encoding = args.photo_encoding == "srgb16" ? synth::PhotoEncoding::kSrgb16
                         : args.photo_encoding == "exr"  ? synth::PhotoEncoding::kLinearExr
                                                         : synth::PhotoEncoding::kSrgb8;
@@ -67,6 +75,7 @@ int RunSynth(SynthArgs args) {
   if (Status s = args.frame.ValidateFor(args.painting.width_mm, args.painting.height_mm); !s.ok())
     return Fail(cmd, s.message());
   if (Status s = args.photo.Validate(); args.photos && !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.rti_options.Validate(); args.rti && !s.ok()) return Fail(cmd, s.message());
   const FolderOutput output{cmd, "synth", {}};
   if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
 
@@ -87,10 +96,18 @@ int RunSynth(SynthArgs args) {
         scene, scan.canvas_from_scan, args.photo, materials,
         [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); });
   }
+  synth::SyntheticRtiCapture rti;
+  if (args.rti) {
+    bar.Update("rti", 0.7 * k + render_share);
+    rti = synth::SimulateRti(painting, args.rti_options);
+  }
   bar.Update("writing", 0.7 * k + render_share);
   Status written =
       WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
         if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
+        if (args.rti) {
+          if (Status s = synth::WriteSyntheticRti(dir / "rti", rti); !s.ok()) return s;
+        }
         if (!args.photos) return Status::Ok();
         return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
       });
@@ -102,6 +119,10 @@ int RunSynth(SynthArgs args) {
       args.scan.width_px, args.scan.height_px, scan.exposures.size(), args.out.c_str());
   if (args.photos) {
     std::printf("photo set: %s -> %s/photos/\n", photos.Brief().c_str(), args.out.c_str());
+  }
+  if (args.rti) {
+    std::printf("RTI capture: %s -> %s/rti/ (pitch %g mm)\n", rti.Brief().c_str(), args.out.c_str(),
+                rti.pitch_mm);
   }
   return 0;
 }
@@ -233,6 +254,37 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
               "as a 7th material (off by default)")
       ->needs(photos)
       ->group("Photos");
+  auto& rt = args->rti_options;
+  CLI::Option* rti =
+      c->add_flag("--rti", args->rti,
+                  "Also render an RTI capture of the painting (orthographic camera straight down, "
+                  "image pixel = texel; dirs.lp with the nominal directions; truth normals, "
+                  "heights, albedo, lights) into <out>/rti/")
+          ->group("RTI");
+  c->add_option("--rti-lights", rt.lights, "Directional lights on a dome (count)")
+      ->capture_default_str()
+      ->needs(rti)
+      ->group("RTI");
+  c->add_option("--rti-jitter-deg", rt.direction_jitter_deg,
+                "Handheld light: true direction off the .lp's by this sigma (degrees)")
+      ->capture_default_str()
+      ->needs(rti)
+      ->group("RTI");
+  c->add_option("--rti-intensity-error", rt.intensity_error,
+                "Per-image light intensity uniform in 1 +- this (share)")
+      ->capture_default_str()
+      ->needs(rti)
+      ->group("RTI");
+  c->add_option("--rti-light-distance-mm", rt.light_distance_mm,
+                "Point lights at this distance from the canvas centre (mm; 0 = directional)")
+      ->capture_default_str()
+      ->needs(rti)
+      ->group("RTI");
+  c->add_option("--rti-encoding", args->rti_encoding, "Image files: 8-bit sRGB PNG or linear EXR")
+      ->check(CLI::IsMember({"srgb8", "exr"}))
+      ->capture_default_str()
+      ->needs(rti)
+      ->group("RTI");
   c->callback([args, &exit_code] { exit_code = RunSynth(*args); });
 }
 
