@@ -218,8 +218,9 @@ TEST(FuzzCorpusTest, DeeplyNestedValueIsAnErrorNotAStackOverflow) {
 // Small on purpose (8x8 and 9x5 texels, 2-4 KB): libFuzzer mutates every byte of a seed.
 
 // An 8x8 (or any size) pack: a bump in the middle, an outside border, one relief box over the
-// bump's cell, reflectance varying per texel, every fit status.
-Pack TinyPack(int w, int h, bool with_box) {
+// bump's cell, reflectance varying per texel, every fit status; with `ggx`, the right half GGX
+// (varnish and gold rows, alpha 0.05 .. 0.3).
+Pack TinyPack(int w, int h, bool with_box, bool ggx = false) {
   Pack p;
   p.field.pitch_mm = 0.25;
   p.field.height_mm = Grid<float>(w, h, 0.0f);
@@ -242,6 +243,13 @@ Pack TinyPack(int w, int h, bool with_box) {
       lp.cy = -0.9f;
       lp.k = 10.0f + 5.0f * y;
       p.maps.Set(x, y, lp);
+      if (ggx && x >= w / 2) {
+        const bool gold = y % 2 == 0;
+        p.maps.SetGgx(x, y,
+                      {gold ? Vec3f::Zero() : lp.rho_d,
+                       gold ? Vec3f(1.0f, 0.78f, 0.34f) : Vec3f::Constant(0.04f),
+                       0.05f + 0.05f * float(x - w / 2)});
+      }
       p.maps.status(x, y) = static_cast<TexelFitStatus>((x + y) % kTexelFitStatusCount);
     }
   }
@@ -306,18 +314,30 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   ASSERT_TRUE(WritePack(dir / "valid_quantised_9x5.exr", TinyPack(9, 5, false), quantised).ok());
 
   RewriteUncompressed(dir / "valid_half_8x8_box.exr", dir / "valid_uncompressed_8x8_box.exr");
+  // GGX texels (pack version 2), and a texel naming a model no reader knows (M = 2 x 64 + 1).
+  // The valid_v1_* seeds are packs of version 1 (before models), kept as they were written.
+  ASSERT_TRUE(WritePack(dir / "valid_ggx_8x8_box.exr", TinyPack(8, 8, true, true)).ok());
+  RewriteUncompressed(dir / "valid_ggx_8x8_box.exr", dir / "valid_uncompressed_ggx_8x8_box.exr");
+  ASSERT_EQ(forge::ForgePack(dir / "valid_uncompressed_ggx_8x8_box.exr",
+                             dir / "bad_unknown_model.exr", {}, {},
+                             [](int part, const OIIO::ImageSpec& spec, std::vector<char>& px) {
+                               if (part == 0) {
+                                 ASSERT_TRUE(forge::SetHalf(spec, px, "M", 2, 3, 129));
+                               }
+                             }),
+            "");
   const std::string good = test::ReadFileBytes(dir / "valid_half_8x8_box.exr");
   ASSERT_GT(good.size(), 200u);
   test::WriteFileBytes(dir / "bad_truncated.exr", good.substr(0, good.size() * 2 / 3));
   std::string flipped = good;
   flipped[flipped.size() - 20] ^= 0x10;  // in the last part's pixel data
   test::WriteFileBytes(dir / "bad_bit_flip.exr", flipped);
-  // A newer version: the digitize:version string attribute's value "1" becomes "9".
+  // A newer version: the digitize:version string attribute's value (one digit) becomes "9".
   const std::string key = std::string("digitize:version") + '\0' + "string" + '\0';
   const size_t at = good.find(key);
   ASSERT_NE(at, std::string::npos);
   std::string newer = good;
-  ASSERT_EQ(newer[at + key.size() + 4], '1');
+  ASSERT_EQ(newer[at + key.size() + 4], char('0' + kPackVersion));
   newer[at + key.size() + 4] = '9';
   test::WriteFileBytes(dir / "bad_newer_version.exr", newer);
   test::WriteFileBytes(dir / "bad_not_exr.exr", "digitize.pack, but not an OpenEXR file\n");
@@ -341,8 +361,8 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   fs::create_directories(viewer_dir);
   for (const char* name :
        {"valid_half_8x8_box.exr", "valid_quantised_9x5.exr", "valid_uncompressed_8x8_box.exr",
-        "bad_forged_pitch_1e308.exr", "bad_forged_max_height.exr", "bad_forged_translation.exr",
-        "bad_truncated.exr"})
+        "valid_ggx_8x8_box.exr", "bad_unknown_model.exr", "bad_forged_pitch_1e308.exr",
+        "bad_forged_max_height.exr", "bad_forged_translation.exr", "bad_truncated.exr"})
     fs::copy_file(dir / name, viewer_dir / name, fs::copy_options::overwrite_existing);
   {
     Pack line = TinyPack(1, 6, false);

@@ -6,12 +6,14 @@
 // their own. That such a forgery reads back at all (pack_test) also checks the definition.
 #pragma once
 
+#include <OpenImageIO/half.h>
 #include <OpenImageIO/hash.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <string>
 #include <utility>
@@ -19,9 +21,30 @@
 
 namespace digitize::forge {
 
-// Returns "" on success, else what failed.
+// Sets channel `channel` of pixel (x, y) in a half part's pixels as the file stores them
+// (channels in the file's order). False when the part has no such channel or pixel.
+inline bool SetHalf(const OIIO::ImageSpec& spec, std::vector<char>& pixels,
+                    const std::string& channel, int x, int y, float value) {
+  const auto it = std::find(spec.channelnames.begin(), spec.channelnames.end(), channel);
+  if (it == spec.channelnames.end() || spec.format != OIIO::TypeDesc::HALF || x < 0 || y < 0 ||
+      x >= spec.width || y >= spec.height)
+    return false;
+  const size_t c = static_cast<size_t>(it - spec.channelnames.begin());
+  const uint16_t bits = half(value).bits();
+  std::memcpy(&pixels[((static_cast<size_t>(y) * spec.width + x) * spec.nchannels + c) * 2], &bits,
+              2);
+  return true;
+}
+
+// Pixels of one part as the file stores them (channels in the file's order, native type).
+using PixelEdit = std::function<void(int part, const OIIO::ImageSpec& spec, std::vector<char>&)>;
+
+// Returns "" on success, else what failed. `erase`: attributes removed (an older writer's header);
+// `edit`: called on every part's pixels before the checksum is recomputed.
 inline std::string ForgePack(const std::filesystem::path& from, const std::filesystem::path& to,
-                             const std::map<std::string, std::string>& attributes) {
+                             const std::map<std::string, std::string>& attributes,
+                             const std::vector<std::string>& erase = {},
+                             const PixelEdit& edit = nullptr) {
   const std::vector<std::vector<std::string>> order = {
       {"H", "NX", "NY", "M"},
       {"rho_d.R", "rho_d.G", "rho_d.B", "rho_s.R", "rho_s.G", "rho_s.B", "lobe.cx", "lobe.cy",
@@ -40,7 +63,11 @@ inline std::string ForgePack(const std::filesystem::path& from, const std::files
   }
   in->close();
   if (specs.size() != order.size()) return "not a 3-part pack";
+  if (edit)
+    for (size_t part = 0; part < specs.size(); ++part)
+      edit(static_cast<int>(part), specs[part], pixels[part]);
   for (const auto& [name, value] : attributes) specs[0].attribute(name, value);
+  for (const std::string& name : erase) specs[0].erase_attribute(name);
 
   std::vector<std::pair<std::string, std::string>> attrs;
   for (const OIIO::ParamValue& p : specs[0].extra_attribs) {

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <random>
 #include <string>
 #include <vector>
@@ -104,6 +105,29 @@ Pack MakeTestPack(int w, int h, uint32_t seed, bool with_relief = true) {
   return p;
 }
 
+// MakeTestPack with the right half of the canvas GGX (reflectance_maps.h): a varnish (F0 0.04,
+// alpha 0.05 .. 0.3) over the diffuse colour, and every third row gold (F0 (1, 0.78, 0.34), rho_d
+// 0); the extremes of the ranges on a few texels (alpha kGgxMinAlpha and 1, F0 1), where rounding
+// could leave the valid range.
+Pack MakeGgxTestPack(int w, int h, uint32_t seed) {
+  Pack p = MakeTestPack(w, h, seed);
+  for (int y = 0; y < h; ++y)
+    for (int x = w / 2; x < w; ++x) {
+      if (p.field.state(x, y) == TexelState::kOutside) continue;
+      GgxParams g;
+      g.rho_d = p.maps.rho_d(x, y);
+      g.f0 = Vec3f::Constant(0.04f);
+      g.alpha = 0.05f + 0.25f * float(x - w / 2) / float(w - w / 2);
+      if (y % 3 == 0) {
+        g.rho_d = Vec3f::Zero();
+        g.f0 = Vec3f(1.0f, 0.78f, 0.34f);
+      }
+      if (x == w / 2) g.alpha = y % 2 ? kGgxMinAlpha : kGgxMaxAlpha;
+      p.maps.SetGgx(x, y, g);
+    }
+  return p;
+}
+
 template <class T>
 bool SameBits(const Grid<T>& a, const Grid<T>& b) {
   return a.width == b.width && a.height == b.height &&
@@ -120,6 +144,7 @@ void ExpectIdentical(const Pack& a, const Pack& b) {
   EXPECT_TRUE(SameBits(a.maps.rho_s, b.maps.rho_s));
   EXPECT_TRUE(SameBits(a.maps.lobe, b.maps.lobe));
   EXPECT_TRUE(SameBits(a.maps.status, b.maps.status));
+  EXPECT_TRUE(SameBits(a.maps.model, b.maps.model));
   EXPECT_EQ(a.delta0_mm, b.delta0_mm);
   EXPECT_EQ(a.max_height_mm, b.max_height_mm);
   EXPECT_EQ(a.cell_px, b.cell_px);
@@ -367,9 +392,9 @@ TEST(Pack, NewerVersionIsRefused) {
   const fs::path dir = TempDir("version");
   ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(16, 16, 12)));
   auto bytes = ReadBytes(dir / "p.pack.exr");
-  // digitize:version is a 1-character string attribute: name, type, size 1 (little endian), "1".
+  // digitize:version is a 1-character string attribute: name, type, size 1 (little endian), "2".
   const std::string attr = std::string("digitize:version") + '\0' + "string" + '\0' +
-                           std::string("\x01\x00\x00\x00", 4) + "1";
+                           std::string("\x01\x00\x00\x00", 4) + std::to_string(kPackVersion);
   std::string newer = attr;
   newer.back() = '7';
   ASSERT_TRUE(Patch(bytes, attr, newer));
@@ -586,6 +611,223 @@ TEST(Pack, AssembleChecksGridSizes) {
   auto bad = AssemblePack(c, ReflectanceMaps::Zeros(10, 10), {});
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.error().message.find("another canvas"), std::string::npos);
+}
+
+// --- reflectance models (version 2) -----------------------------------------------------------
+
+int64_t CountGgx(const Pack& p) {
+  return std::count(p.maps.model.data.begin(), p.maps.model.data.end(), ReflectanceModel::kGgx);
+}
+
+// A pack file whose part `part` has `channel` of texel (x, y) set to `value`, resealed.
+std::string ForgeTexel(const fs::path& from, const fs::path& to, int part,
+                       const std::string& channel, int x, int y, float value) {
+  return forge::ForgePack(from, to, {}, {},
+                          [&](int p, const OIIO::ImageSpec& spec, std::vector<char>& pixels) {
+                            if (p == part) {
+                              EXPECT_TRUE(forge::SetHalf(spec, pixels, channel, x, y, value));
+                            }
+                          });
+}
+
+// GGX texels keep their model and their values through a file, bit for bit in half; inspect,
+// verify and `inspect --json` count the texels of each model.
+TEST(Pack, GgxTexelsRoundTripWithTheirModel) {
+  const fs::path dir = TempDir("ggx");
+  const Pack p = MakeGgxTestPack(64, 48, 21);
+  ASSERT_OK(p.Validate());
+  const int64_t ggx = CountGgx(p);
+  ASSERT_GT(ggx, 64 * 48 / 3);
+  ASSERT_OK(WritePack(dir / "g.pack.exr", p));
+  auto r = ReadPack(dir / "g.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  EXPECT_EQ(CountGgx(*r), ggx);
+  // The texels shade as they were written (half rounding of F0 and alpha: 2^-11 relative; the
+  // peak D ~ 1 / alpha^2 doubles it, the Fresnel and G terms are smooth: 1e-2 is generous).
+  const Vec3f v = Vec3f(0.3f, -0.2f, 1.0f).normalized(), l = Vec3f(-0.25f, 0.2f, 1.0f).normalized();
+  for (int y = 0; y < p.height(); ++y)
+    for (int x = p.width() / 2; x < p.width(); ++x) {
+      const Vec3f a = p.maps.Evaluate(x, y, v, l), b = r->maps.Evaluate(x, y, v, l);
+      ASSERT_LE((a - b).norm(), 1e-2f * a.norm() + 1e-6f) << x << ", " << y;
+    }
+
+  auto s = InspectPack(dir / "g.pack.exr");
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(s->version, kPackVersion);
+  EXPECT_EQ(s->texels_by_model[size_t(ReflectanceModel::kGgx)], ggx);
+  EXPECT_EQ(s->texels_by_model[size_t(ReflectanceModel::kLafortune)], 64 * 48 - ggx);
+  EXPECT_EQ(s->raw_bytes_per_texel, 26);  // the model shares M: no channel added
+  const nlohmann::json j = nlohmann::json::parse(PackSummaryJson("g.pack.exr", *s));
+  EXPECT_EQ(j["models"]["ggx"], ggx);
+  EXPECT_EQ(j["models"]["lafortune"], 64 * 48 - ggx);
+  auto verified = VerifyPack(dir / "g.pack.exr");
+  ASSERT_TRUE(verified.ok()) << verified.error().message;
+  const std::string want = "models: " + std::to_string(64 * 48 - ggx) + " lafortune, " +
+                           std::to_string(ggx) + " ggx texels (as digitize:models)";
+  EXPECT_EQ(std::count_if(verified->checks.begin(), verified->checks.end(),
+                          [&](const std::string& c) { return c.rfind(want, 0) == 0; }),
+            1)
+      << want;
+  fs::remove_all(dir);
+}
+
+// Quantisation rounds to nearest, which could take alpha below kGgxMinAlpha (0 lobe bits:
+// 0.005 -> 0.0039); F0 must stay <= 1 (0.78 with 0 rho bits rounds to 1, never above). Every
+// encoding leaves a valid pack with the models unchanged, and the file reads back exactly that.
+TEST(Pack, QuantisedGgxTexelsStayValid) {
+  const fs::path dir = TempDir("ggx_quant");
+  const Pack p = MakeGgxTestPack(40, 30, 22);
+  for (const int lobe_bits : {0, 1, 3, 6, 10}) {
+    for (const int rho_bits : {0, 4}) {
+      SCOPED_TRACE("lobe_bits " + std::to_string(lobe_bits) + ", rho_bits " +
+                   std::to_string(rho_bits));
+      PackWriteOptions o;
+      o.encoding = PackEncoding::kQuantised;
+      o.quantisation = {8, 5, rho_bits, lobe_bits};
+      const Pack e = EncodePackValues(p, o);
+      ASSERT_OK(e.Validate());
+      ASSERT_TRUE(SameBits(e.maps.model, p.maps.model));
+      const float bound = std::ldexp(1.0f, -(lobe_bits + 1)) + std::ldexp(1.0f, -11);
+      for (size_t i = 0; i < e.maps.model.size(); ++i) {
+        if (e.maps.model.data[i] != ReflectanceModel::kGgx) continue;
+        const auto& lobe = e.maps.lobe.data[i];
+        const float alpha = lobe[3], want = p.maps.lobe.data[i][3];
+        ASSERT_GE(alpha, kGgxMinAlpha);
+        ASSERT_LE(alpha, kGgxMaxAlpha);
+        ASSERT_EQ(lobe[0], 0.0f);
+        ASSERT_EQ(lobe[1], 0.0f);
+        // Within the stated bound, or raised to the first kept value above kGgxMinAlpha.
+        if (std::abs(alpha - want) > bound * want) {
+          ASSERT_LT(want, 2.0f * kGgxMinAlpha);
+        }
+        ASSERT_LE(e.maps.rho_s.data[i].maxCoeff(), 1.0f);
+      }
+      ASSERT_OK(WritePack(dir / "q.pack.exr", p, o));
+      auto r = ReadPack(dir / "q.pack.exr");
+      ASSERT_TRUE(r.ok()) << r.error().message;
+      ExpectIdentical(e, *r);
+    }
+  }
+  fs::remove_all(dir);
+}
+
+// What version 1 writers put in the header (before models): their gauge and units, no
+// digitize:models. M was state + 4 x status, which is version 2's code for a Lafortune texel.
+const std::map<std::string, std::string> kVersion1Header = {
+    {"digitize:version", "1"},
+    {"digitize:gauge",
+     "lafortune1: f = rho_d + rho_s max(0, cx vx lx + cy vy ly + vz lz)^k, cz = 1, v and l in "
+     "the texel's tangent frame (tangent_frame.h)"},
+    {"digitize:units",
+     "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); M = texel "
+     "state + 4 x fit status; rho_d rho_s 1/sr; boxes: h_max mm, u/v_max texels from the cell "
+     "corner"}};
+
+// Packs written before models existed still read: every texel Lafortune, the values as written.
+TEST(Pack, VersionOnePacksReadAsLafortune) {
+  const fs::path dir = TempDir("v1");
+  const Pack p = MakeTestPack(32, 24, 23);
+  ASSERT_OK(WritePack(dir / "v2.pack.exr", p));
+  ASSERT_EQ(forge::ForgePack(dir / "v2.pack.exr", dir / "v1.pack.exr", kVersion1Header,
+                             {"digitize:models"}),
+            "");
+  auto r = ReadPack(dir / "v1.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  EXPECT_EQ(CountGgx(*r), 0);
+  auto s = InspectPack(dir / "v1.pack.exr");
+  ASSERT_TRUE(s.ok()) << s.error().message;
+  EXPECT_EQ(s->version, 1);
+  EXPECT_EQ(s->texels_by_model[size_t(ReflectanceModel::kLafortune)], 32 * 24);
+  EXPECT_EQ(s->texels_by_model[size_t(ReflectanceModel::kGgx)], 0);
+  auto verified = VerifyPack(dir / "v1.pack.exr");
+  ASSERT_TRUE(verified.ok()) << verified.error().message;
+  // A version 1 M with a model term is not a version 1 code.
+  ASSERT_EQ(ForgeTexel(dir / "v1.pack.exr", dir / "v1_m.pack.exr", 0, "M", 3, 2, 65.0f), "");
+  auto bad = ReadPack(dir / "v1_m.pack.exr");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.error().message,
+            (dir / "v1_m.pack.exr").string() +
+                ": texel 3, 2: M = 65 is not a texel state + 4 x fit status (version 1)");
+  // A version 2 pack without its model counts is refused.
+  ASSERT_EQ(
+      forge::ForgePack(dir / "v2.pack.exr", dir / "v2_no_models.pack.exr", {}, {"digitize:models"}),
+      "");
+  auto missing = InspectPack(dir / "v2_no_models.pack.exr");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().message, (dir / "v2_no_models.pack.exr").string() +
+                                         ": header attribute digitize:models is missing");
+  fs::remove_all(dir);
+}
+
+// The model is untrusted input: an unknown model value, a GGX texel out of its ranges, counts
+// that disagree with the texels -- each refused naming the file (and the texel).
+TEST(Pack, UnknownOrInvalidModelsAreRefused) {
+  const fs::path dir = TempDir("models_bad");
+  const Pack p = MakeGgxTestPack(32, 24, 24);
+  const fs::path good = dir / "g.pack.exr";
+  ASSERT_OK(WritePack(good, p));
+  ASSERT_EQ(p.maps.model(28, 4), ReflectanceModel::kGgx);
+  ASSERT_EQ(p.maps.model(5, 4), ReflectanceModel::kLafortune);
+  struct Case {
+    const char* name;
+    int part;
+    const char* channel;
+    int x, y;
+    float value;
+    std::string expect;  // the message after "FILE: "
+  };
+  const std::vector<Case> cases = {
+      {"model2", 0, "M", 5, 4, 2 * 64 + 1,
+       "texel 5, 4: M = 129 names reflectance model 2, which this reader does not know "
+       "(lafortune = 0, ggx = 1)"},
+      {"model31", 0, "M", 5, 4, 31 * 64,
+       "texel 5, 4: M = 1984 names reflectance model 31, which this reader does not know "
+       "(lafortune = 0, ggx = 1)"},
+      {"status", 0, "M", 5, 4, 1 + 4 * 15,
+       "texel 5, 4: M = 61 is not a texel state + 4 x fit status + 64 x reflectance model"},
+      {"f0", 1, "rho_s.G", 28, 4, 1.5f, "texel 28, 4: a GGX texel's F0 (rho_s) exceeds 1"},
+      {"alpha", 1, "lobe.k", 28, 4, 0.001f,
+       "texel 28, 4: a GGX texel's alpha (lobe.k) 0.0010004 is outside [0.005, 1]"},
+      {"cx", 1, "lobe.cx", 28, 4, -1.0f, "texel 28, 4: a GGX texel's lobe.cx, lobe.cy must be 0"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const fs::path forged = dir / (std::string(c.name) + ".pack.exr");
+    ASSERT_EQ(ForgeTexel(good, forged, c.part, c.channel, c.x, c.y, c.value), "");
+    auto r = ReadPack(forged);
+    ASSERT_FALSE(r.ok());
+    EXPECT_EQ(r.error().message, forged.string() + ": " + c.expect);
+    auto v = VerifyPack(forged);
+    ASSERT_FALSE(v.ok());
+    EXPECT_EQ(v.error().message, r.error().message);
+  }
+  // Header counts that add up but disagree with the texels.
+  const int64_t ggx = CountGgx(p), laf = 32 * 24 - ggx;
+  const fs::path moved = dir / "counts.pack.exr";
+  ASSERT_EQ(forge::ForgePack(good, moved,
+                             {{"digitize:models", "lafortune=" + std::to_string(laf + 1) +
+                                                      ",ggx=" + std::to_string(ggx - 1)}}),
+            "");
+  auto r = ReadPack(moved);
+  ASSERT_FALSE(r.ok());
+  EXPECT_EQ(r.error().message,
+            moved.string() + ": the texels are lafortune=" + std::to_string(laf) +
+                ",ggx=" + std::to_string(ggx) + ", the header's digitize:models says lafortune=" +
+                std::to_string(laf + 1) + ",ggx=" + std::to_string(ggx - 1));
+  for (const std::string& text :
+       {std::string("ggx=3"), std::string("lafortune=1,ggx=2,x=1"),
+        std::string("lafortune=-1,ggx=769"), std::string("lafortune=768,ggx=1")}) {
+    SCOPED_TRACE(text);
+    const fs::path forged = dir / "models_text.pack.exr";
+    ASSERT_EQ(forge::ForgePack(good, forged, {{"digitize:models", text}}), "");
+    auto s = InspectPack(forged);
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.error().message.rfind(forged.string() + ": ", 0), 0u) << s.error().message;
+    EXPECT_NE(s.error().message.find("digitize:models"), std::string::npos) << s.error().message;
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -169,6 +169,53 @@ TEST_F(UntrustedPackTest, ForgedPitchIsRefusedByVerifyAndInspect) {
   }
 }
 
+// Reflectance models through the tools: `inspect --json` counts the texels of each model from the
+// header, `verify` lists them, and a texel naming a model no reader knows (forged with a
+// recomputed checksum) is refused by verify naming the file and the texel; inspect, which reads
+// no pixel, still shows the header.
+TEST_F(UntrustedPackTest, ToolsReportModelsAndRefuseUnknownOnes) {
+  Pack p = SmallPack();
+  int64_t ggx = 0;
+  for (int y = 0; y < p.height(); ++y)
+    for (int x = p.width() / 2; x < p.width(); ++x) {
+      if (p.field.state(x, y) == TexelState::kOutside) continue;
+      p.maps.SetGgx(x, y, {Vec3f::Zero(), Vec3f(1.0f, 0.78f, 0.34f), 0.2f});
+      ++ggx;
+    }
+  const fs::path pack = dir_ / "ggx.pack.exr";
+  ASSERT_TRUE(WritePack(pack, p).ok());
+  const Output json = RunProgram(DIGITIZE_CLI, "inspect --json " + Quote(pack), dir_);
+  ASSERT_EQ(json.exit_code, 0) << json.err;
+  const auto doc = nlohmann::json::parse(json.out, nullptr, false);
+  ASSERT_FALSE(doc.is_discarded()) << json.out;
+  EXPECT_EQ(doc["version"], kPackVersion);
+  EXPECT_EQ(doc["models"]["ggx"], ggx);
+  EXPECT_EQ(doc["models"]["lafortune"], int64_t(p.width()) * p.height() - ggx);
+  const Output verify = RunProgram(DIGITIZE_CLI, "verify " + Quote(pack), dir_);
+  ASSERT_EQ(verify.exit_code, 0) << verify.err;
+  EXPECT_NE(verify.out.find("ok  models: " + std::to_string(p.width() * p.height() - ggx) +
+                            " lafortune, " + std::to_string(ggx) + " ggx texels"),
+            std::string::npos)
+      << verify.out;
+
+  const fs::path forged = dir_ / "model7.pack.exr";
+  ASSERT_EQ(forge::ForgePack(pack, forged, {}, {},
+                             [](int part, const OIIO::ImageSpec& spec, std::vector<char>& px) {
+                               if (part == 0) {
+                                 ASSERT_TRUE(forge::SetHalf(spec, px, "M", 3, 2, 7 * 64 + 1));
+                               }
+                             }),
+            "");
+  const Output refused = RunProgram(DIGITIZE_CLI, "verify " + Quote(forged), dir_);
+  EXPECT_EQ(refused.exit_code, 1);
+  EXPECT_NE(refused.err.find(forged.string() +
+                             ": texel 3, 2: M = 449 names reflectance model 7, which this reader "
+                             "does not know (lafortune = 0, ggx = 1)"),
+            std::string::npos)
+      << refused.err;
+  EXPECT_EQ(RunProgram(DIGITIZE_CLI, "inspect " + Quote(forged), dir_).exit_code, 0);
+}
+
 #ifdef DIGITIZE_VIEWER
 // The viewer never aborts on a shared pack: the forged one fails to load, a 1-texel-wide one
 // (valid, but nothing the renderer can hang) fails to hang; both are listed on stderr and the

@@ -136,4 +136,33 @@ TEST_F(ViewerCliTest, HeadlessNeedsAScreenshotNameAndUsageErrorsExitOne) {
   EXPECT_EQ(RunViewer("--help").exit_code, 0);
 }
 
+// --mode: every view mode writes its screenshot, each a different image of the same gallery; an
+// unknown mode or a light below the canvas is a usage error naming what is wrong, writing nothing.
+TEST_F(ViewerCliTest, EveryViewModeWritesItsScreenshot) {
+  std::string previous;
+  for (const char* mode : {"relit", "light", "specular", "normals", "raking"}) {
+    const std::string shot = std::string(mode) + ".png";
+    const Output out = RunViewer(std::string("--synthetic --size 96x64 --mode ") + mode +
+                                 " --light-azimuth 0 --light-elevation 30 --screenshot " + shot);
+    ASSERT_EQ(out.exit_code, 0) << mode << "\n" << out.text;
+    std::ifstream in(Path(shot), std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    EXPECT_GT(ss.str().size(), 100u) << mode;
+    EXPECT_NE(ss.str(), previous) << mode << " wrote the same image as the mode before it";
+    previous = ss.str();
+  }
+  const Output bad = RunViewer("--synthetic --mode rti --screenshot bad.png");
+  EXPECT_EQ(bad.exit_code, 1) << bad.text;
+  EXPECT_NE(bad.text.find("unknown view mode 'rti' (relit, light, specular, normals, raking)"),
+            std::string::npos)
+      << bad.text;
+  const Output low =
+      RunViewer("--synthetic --mode raking --raking-elevation 0 --screenshot bad.png");
+  EXPECT_EQ(low.exit_code, 1) << low.text;
+  EXPECT_NE(low.text.find("raking_elevation_deg must be in (0, 90]"), std::string::npos)
+      << low.text;
+  EXPECT_FALSE(fs::exists(Path("bad.png")));
+}
+
 }  // namespace

@@ -16,6 +16,25 @@
 namespace digitize {
 namespace pack_exr {
 
+int TexelCode(TexelState state, TexelFitStatus status, ReflectanceModel model) {
+  return static_cast<int>(state) + kStatesPerStatus * static_cast<int>(status) +
+         kModelStride * static_cast<int>(model);
+}
+
+std::string ModelCountsText(const std::array<int64_t, kReflectanceModelCount>& counts) {
+  std::string text;
+  for (int m = 0; m < kReflectanceModelCount; ++m)
+    text += std::string(m > 0 ? "," : "") + ToString(static_cast<ReflectanceModel>(m)) + "=" +
+            std::to_string(counts[m]);
+  return text;
+}
+
+std::array<int64_t, kReflectanceModelCount> CountModels(const ReflectanceMaps& maps) {
+  std::array<int64_t, kReflectanceModelCount> counts{};
+  for (const ReflectanceModel m : maps.model.data) ++counts[static_cast<size_t>(m)];
+  return counts;
+}
+
 std::string TexelName(int x, int y) { return std::to_string(x) + ", " + std::to_string(y); }
 
 uint16_t ToHalfBits(float v) { return half(v).bits(); }
@@ -215,6 +234,16 @@ Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options) {
     auto& lobe = out.maps.lobe.data[i];
     lobe = {Encode(lobe[0], bits.lobe_bits), Encode(lobe[1], bits.lobe_bits), 1.0f,
             Encode(lobe[3], bits.lobe_bits)};
+    if (pack.maps.model.data[i] == ReflectanceModel::kGgx) {
+      // Rounding to nearest keeps F0 <= 1 and alpha <= 1 (1 is kept exactly), but may take alpha
+      // below kGgxMinAlpha (with few lobe bits): then the next kept value up.
+      uint16_t alpha = QuantiseHalfBits(ToHalfBits(pack.maps.lobe.data[i][3]), bits.lobe_bits);
+      const uint16_t step = static_cast<uint16_t>(1u << (10 - std::min(bits.lobe_bits, 10)));
+      while (FromHalfBits(alpha) < kGgxMinAlpha) alpha = static_cast<uint16_t>(alpha + step);
+      lobe = {0.0f, 0.0f, 1.0f, FromHalfBits(alpha)};
+      for (int c = 0; c < 3; ++c)
+        out.maps.rho_s.data[i][c] = std::min(out.maps.rho_s.data[i][c], 1.0f);
+    }
   }
   return out;
 }

@@ -6,6 +6,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <array>
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -26,6 +27,17 @@ inline const std::vector<std::string> kReflectanceChannels = {"rho_d.R", "rho_d.
                                                               "lobe.cx", "lobe.cy", "lobe.k"};
 inline const std::vector<std::string> kBoxChannels = {"present", "h_max", "u_max", "v_max"};
 inline const char* const kPartNames[kParts] = {"surface", "reflectance", "boxes"};
+
+// Part 0's M channel: state + 4 x fit status + kModelStride x model (version 2; version 1 has no
+// model term). The stride leaves room for 16 fit statuses; every code is an integer below 2048,
+// exact in half.
+inline constexpr int kModelStride = 64;
+inline constexpr int kStatesPerStatus = 4;
+int TexelCode(TexelState state, TexelFitStatus status, ReflectanceModel model);
+
+// digitize:models, "lafortune=N,ggx=M": texels per model, in ReflectanceModel order.
+std::string ModelCountsText(const std::array<int64_t, kReflectanceModelCount>& counts);
+std::array<int64_t, kReflectanceModelCount> CountModels(const ReflectanceMaps& maps);
 
 // "x, y" of a texel in messages.
 std::string TexelName(int x, int y);

@@ -269,6 +269,45 @@ Status CheckSizeMm(const std::string& file, const std::string& text, const PackS
   return Status::Ok();
 }
 
+// "lafortune = 0, ggx = 1": the models this reader knows, with their codes.
+std::string KnownModels() {
+  std::string text;
+  for (int m = 0; m < kReflectanceModelCount; ++m)
+    text += std::string(m > 0 ? ", " : "") + ToString(static_cast<ReflectanceModel>(m)) + " = " +
+            std::to_string(m);
+  return text;
+}
+
+// digitize:models ("lafortune=N,ggx=M", every model in ReflectanceModel order, counts adding up to
+// the texels).
+Status ParseModelCounts(const std::string& file, const std::string& text, int64_t texels,
+                        std::array<int64_t, kReflectanceModelCount>& counts) {
+  const std::string bad = file + ": header attribute digitize:models = \"" +
+                          EscapeForTerminal(text.substr(0, 60)) +
+                          "\" is not texel counts per model (\"lafortune=N,ggx=N\", every "
+                          "model of " +
+                          KnownModels() + " in order)";
+  if (text.empty()) return Error{file + ": header attribute digitize:models is missing"};
+  const char* p = text.data();
+  const char* end = text.data() + text.size();
+  int64_t sum = 0;
+  for (int m = 0; m < kReflectanceModelCount; ++m) {
+    const std::string key =
+        std::string(m > 0 ? "," : "") + ToString(static_cast<ReflectanceModel>(m)) + "=";
+    if (std::string_view(p, end - p).rfind(key, 0) != 0) return Error{bad};
+    p += key.size();
+    const auto r = std::from_chars(p, end, counts[m]);
+    if (r.ec != std::errc() || counts[m] < 0 || counts[m] > texels) return Error{bad};
+    p = r.ptr;
+    sum += counts[m];
+  }
+  if (p != end) return Error{bad};
+  if (sum != texels)
+    return Error{file + ": digitize:models counts " + std::to_string(sum) +
+                 " texels, the pack has " + std::to_string(texels)};
+  return Status::Ok();
+}
+
 struct Header {
   PackSummary summary;
   RigidTransform canvas_from_scan;
@@ -313,6 +352,14 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   s.height = spec.height;
   if (spec.width != raw->at(0).width || spec.height != raw->at(0).height)
     return Error{file + ": part sizes disagree between the raw header and the reader"};
+  if (s.version == 1) {  // before models: every texel Lafortune
+    s.texels_by_model[static_cast<size_t>(ReflectanceModel::kLafortune)] =
+        int64_t{s.width} * s.height;
+  } else if (Status st = ParseModelCounts(file, spec.get_string_attribute("digitize:models"),
+                                          int64_t{s.width} * s.height, s.texels_by_model);
+             !st.ok()) {
+    return Error{st.message()};
+  }
 
   for (auto [key, target] : {std::pair<const char*, double*>{"digitize:pitch_mm", &s.pitch_mm},
                              {"digitize:delta0_mm", &s.delta0_mm},
@@ -505,12 +552,23 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     if (!(std::abs(nx) <= 1.001f && std::abs(ny) <= 1.001f && nx * nx + ny * ny <= 1.002f))
       return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) +
                         ") is not a unit normal's x, y");
-    if (!(code >= 0 && code < 4 * kTexelFitStatusCount && code == std::floor(code)))
-      return bad(i, "M = " + FormatNumber(code) + " is not a texel state + 4 x fit status");
+    // Version 1: state + 4 x status (below 24); version 2 adds kModelStride x model.
+    const bool v1 = s.version == 1;
+    const int stride = v1 ? kStatesPerStatus * kTexelFitStatusCount : kModelStride;
+    if (!(code >= 0 && code < (v1 ? stride : 2048) && code == std::floor(code)) ||
+        (static_cast<int>(code) % stride) / kStatesPerStatus >= kTexelFitStatusCount)
+      return bad(i, "M = " + FormatNumber(code) + " is not a texel state + 4 x fit status" +
+                        (v1 ? " (version 1)" : " + 64 x reflectance model"));
     const int c = static_cast<int>(code);
+    if (c / stride >= kReflectanceModelCount)
+      return bad(i, "M = " + std::to_string(c) + " names reflectance model " +
+                        std::to_string(c / stride) + ", which this reader does not know (" +
+                        KnownModels() + ")");
+    const auto model = static_cast<ReflectanceModel>(c / stride);
     pack.field.height_mm.data[i] = height;
-    pack.field.state.data[i] = static_cast<TexelState>(c % 4);
-    pack.maps.status.data[i] = static_cast<TexelFitStatus>(c / 4);
+    pack.field.state.data[i] = static_cast<TexelState>(c % kStatesPerStatus);
+    pack.maps.status.data[i] = static_cast<TexelFitStatus>((c % stride) / kStatesPerStatus);
+    pack.maps.model.data[i] = model;
     pack.normals.data[i] = NormalFromXY(nx, ny);
     float v[9];
     for (int k = 0; k < 9; ++k) {
@@ -523,7 +581,17 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     pack.maps.rho_d.data[i] = Vec3f(v[0], v[1], v[2]);
     pack.maps.rho_s.data[i] = Vec3f(v[3], v[4], v[5]);
     pack.maps.lobe.data[i] = {v[6], v[7], 1.0f, v[8]};
+    if (model == ReflectanceModel::kGgx) {
+      if (v[3] > 1 || v[4] > 1 || v[5] > 1) return bad(i, "a GGX texel's F0 (rho_s) exceeds 1");
+      if (!(v[8] >= kGgxMinAlpha && v[8] <= kGgxMaxAlpha))
+        return bad(i, "a GGX texel's alpha (lobe.k) " + FormatNumber(v[8]) + " is outside [" +
+                          FormatNumber(kGgxMinAlpha) + ", " + FormatNumber(kGgxMaxAlpha) + "]");
+      if (v[6] != 0 || v[7] != 0) return bad(i, "a GGX texel's lobe.cx, lobe.cy must be 0");
+    }
   }
+  if (const auto counts = CountModels(pack.maps); counts != s.texels_by_model)
+    return Error{file + ": the texels are " + ModelCountsText(counts) +
+                 ", the header's digitize:models says " + ModelCountsText(s.texels_by_model)};
   const int cells_x = header->cells_x, cells_y = header->cells_y;
   for (int cy = 0; cy < cells_y; ++cy)
     for (int cx = 0; cx < cells_x; ++cx) {
@@ -573,7 +641,10 @@ std::string PackSummaryJson(const std::string& file, const PackSummary& s) {
             {"bytes_per_texel", s.BytesPerTexel()},
             {"raw_bytes_per_texel", s.raw_bytes_per_texel},
             {"gauge", s.gauge},
+            {"models", json::object()},
             {"provenance", ProvenanceToJson(s.provenance)}};
+  for (int m = 0; m < kReflectanceModelCount; ++m)
+    j["models"][ToString(static_cast<ReflectanceModel>(m))] = s.texels_by_model[m];
   if (s.encoding == PackEncoding::kQuantised)
     j["mantissa_bits"] = ToJson(PackWriteOptions{s.encoding, s.quantisation})["mantissa_bits"];
   return j.dump(2, ' ', /*ensure_ascii=*/true, json::error_handler_t::replace);

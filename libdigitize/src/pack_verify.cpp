@@ -38,6 +38,16 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   v.checks.push_back("values: " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
                      " texels, every value finite, rho >= 0, k >= 0, unit normals, states and "
                      "statuses known");
+  // ReadPack refused the file unless the texels' models add up to digitize:models.
+  std::string models;
+  for (int m = 0; m < kReflectanceModelCount; ++m)
+    models += std::string(m > 0 ? ", " : "") + std::to_string(v.summary.texels_by_model[m]) + " " +
+              ToString(static_cast<ReflectanceModel>(m));
+  v.checks.push_back(
+      "models: " + models + " texels" +
+      (v.summary.version == 1 ? " (version 1: every texel Lafortune)" : " (as digitize:models)") +
+      "; GGX texels with F0 <= 1 and alpha in [" + FormatNumber(kGgxMinAlpha) + ", " +
+      FormatNumber(kGgxMaxAlpha) + "]");
   // Heights are stored in half (or fewer bits): compare within that rounding.
   const double rel = std::ldexp(
       1.0,

@@ -18,11 +18,9 @@ using namespace pack_exr;
 
 constexpr const char* kGauge =
     "lafortune1: f = rho_d + rho_s max(0, cx vx lx + cy vy ly + vz lz)^k, "
-    "cz = 1, v and l in the texel's tangent frame (tangent_frame.h)";
-
-uint16_t StateStatusCode(TexelState state, TexelFitStatus status) {
-  return static_cast<uint16_t>(static_cast<int>(state) + 4 * static_cast<int>(status));
-}
+    "cz = 1, v and l in the texel's tangent frame (tangent_frame.h); "
+    "ggx (M model 1): f = rho_d + F D G1(v) G1(l) / (4 vz lz), GGX D and Smith G1 of roughness "
+    "alpha = lobe.k, Schlick F of F0 = rho_s, lobe.cx = lobe.cy = 0 (ggx.h)";
 
 std::string QuantisationText(const PackQuantisation& q) {
   return "height=" + std::to_string(q.height_bits) + ",normal=" + std::to_string(q.normal_bits) +
@@ -59,8 +57,8 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
     surface[4 * i + 0] = ToHalfBits(enc.field.height_mm.data[i]);
     surface[4 * i + 1] = ToHalfBits(enc.normals.data[i].x());
     surface[4 * i + 2] = ToHalfBits(enc.normals.data[i].y());
-    surface[4 * i + 3] =
-        ToHalfBits(StateStatusCode(pack.field.state.data[i], pack.maps.status.data[i]));
+    surface[4 * i + 3] = ToHalfBits(static_cast<float>(
+        TexelCode(pack.field.state.data[i], pack.maps.status.data[i], pack.maps.model.data[i])));
     uint16_t* r = &reflectance[9 * i];
     for (int c = 0; c < 3; ++c) {
       r[c] = ToHalfBits(enc.maps.rho_d.data[i][c]);
@@ -107,8 +105,10 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
   meta.attribute(
       "digitize:units",
       "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
-      "M = texel state + 4 x fit status; rho_d rho_s 1/sr; boxes: h_max mm, u/v_max texels "
-      "from the cell corner");
+      "M = texel state + 4 x fit status + 64 x reflectance model (0 lafortune, 1 ggx); rho_d "
+      "1/sr; rho_s 1/sr (lafortune) or F0 in [0, 1] (ggx); lobe.k exponent (lafortune) or GGX "
+      "alpha (ggx); boxes: h_max mm, u/v_max texels from the cell corner");
+  meta.attribute("digitize:models", ModelCountsText(CountModels(pack.maps)));
   meta.attribute("digitize:pitch_mm", FormatNumber(pack.field.pitch_mm, kRoundTripDigits));
   meta.attribute("digitize:size_mm", FormatNumber(pack.width_mm(), kRoundTripDigits) + " x " +
                                          FormatNumber(pack.height_mm(), kRoundTripDigits));

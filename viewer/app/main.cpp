@@ -2,11 +2,14 @@
 // options, the library does the work.
 //
 //   digitize-viewer [PACK.pack.exr ...] [--synthetic] [--technique adaptive]
+//                   [--mode relit|light|specular|normals|raking]
 //                   [--screenshot shot.png [--camera-path path.json] [--size 1280x720]]
 //
 // With a display: a GLFW window (OpenGL 4.5 core), walk with W/A/S/D (Q/E down/up, shift
-// faster), look by dragging with the right mouse button; a Dear ImGui panel for technique,
-// K / eps, screen-space error, box overlay, alpha heat map, lights, frame time and boxes drawn.
+// faster), look by dragging with the right mouse button; in the light and specular modes the
+// left mouse button drags the light over the painting (the cursor's place in the window picks a
+// direction on the hemisphere); a Dear ImGui panel for technique, view mode, K / eps,
+// screen-space error, box overlay, alpha heat map, lights, frame time and boxes drawn.
 // Without a display (or with --screenshot): headless (EGL surfaceless) screenshots.
 // Packs that fail to load are listed (stderr and the panel); the others are shown.
 #include <epoxy/gl.h>
@@ -102,6 +105,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   double frame_ms = 0;
   FrameStats stats;
   int technique = int(options.technique);
+  int mode = int(options.mode);
   int frame = 0;
   bool shot_failed = false;  // --window-shot not written: exit 1
   float exposure_ambient = float(options.ambient);
@@ -139,6 +143,20 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     }
     last_x = mx;
     last_y = my;
+    // The RTI tools' light: drag with the left button, the cursor over the window is the light's
+    // place on the unit disc (right = canvas +x, up = canvas +y), lifted onto the hemisphere.
+    const bool left_down = glfwGetMouseButton(window, GLFW_MOUSE_BUTTON_LEFT) == GLFW_PRESS;
+    const ViewMode current = ViewMode(mode);
+    if (left_down && !io.WantCaptureMouse &&
+        (current == ViewMode::kLight || current == ViewMode::kSpecular)) {
+      int ww, wh;
+      glfwGetWindowSize(window, &ww, &wh);
+      if (ww > 0 && wh > 0) {
+        const double side = std::min(ww, wh);
+        options.light_direction =
+            HemisphereLightDirection((2 * mx - ww) / side, (wh - 2 * my) / side);
+      }
+    }
     // Keep the walker inside the room.
     walker.eye.x() = std::clamp(walker.eye.x(), 50.0, g.width_mm - 50);
     walker.eye.y() = std::clamp(walker.eye.y(), 50.0, g.depth_mm - 50);
@@ -157,6 +175,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
       cam.near_mm = 5;
       cam.far_mm = 4 * (g.width_mm + g.depth_mm + g.height_mm);
       options.technique = Technique(technique);
+      options.mode = ViewMode(mode);
       options.ambient = exposure_ambient;
       if (options.Validate().ok() && cam.Validate().ok()) {
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
@@ -182,6 +201,32 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     const char* names[] = {"mesh",   "relief everywhere", "bump",
                            "hybrid", "hybrid + adaptive", "screen-space error"};
     ImGui::Combo("technique", &technique, names, 6);
+    const char* modes[] = {"relit (gallery lights)", "light (drag: left button)",
+                           "specular enhancement", "normals", "raking light"};
+    ImGui::Combo("mode", &mode, modes, 5);
+    if (ViewMode(mode) == ViewMode::kLight || ViewMode(mode) == ViewMode::kSpecular) {
+      const Vec3d& d = options.light_direction;
+      ImGui::Text("light: azimuth %.0f deg, elevation %.0f deg",
+                  std::atan2(d.y(), d.x()) * 180 / kPi,
+                  std::asin(std::clamp(d.z(), -1.0, 1.0)) * 180 / kPi);
+    }
+    if (ViewMode(mode) == ViewMode::kRaking) {
+      float az = float(options.raking_azimuth_deg), el = float(options.raking_elevation_deg);
+      ImGui::SliderFloat("raking azimuth (deg)", &az, -180.0f, 180.0f, "%.0f");
+      ImGui::SliderFloat("raking elevation (deg)", &el, 1.0f, 45.0f, "%.0f");
+      options.raking_azimuth_deg = az;
+      options.raking_elevation_deg = el;
+    }
+    if (ViewMode(mode) == ViewMode::kSpecular) {
+      float sd = float(options.specular_diffuse), sg = float(options.specular_gain),
+            ss = float(options.specular_sharpen);
+      ImGui::SliderFloat("diffuse (grey)", &sd, 0.0f, 1.0f);
+      ImGui::SliderFloat("specular gain", &sg, 0.0f, 10.0f);
+      ImGui::SliderFloat("sharpen", &ss, 1.0f, 8.0f);
+      options.specular_diffuse = sd;
+      options.specular_gain = sg;
+      options.specular_sharpen = ss;
+    }
     float k = float(options.k), emin = float(options.eps_min), emax = float(options.eps_max);
     float px = float(options.max_error_px);
     ImGui::SliderFloat("K", &k, 0.1f, 10.0f, "%.2f", ImGuiSliderFlags_Logarithmic);
@@ -257,6 +302,20 @@ int main(int argc, char** argv) {
                  "render headless into this image (.png, .jpg, .tif, .exr) and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
+  std::string mode = "relit";
+  double light_azimuth = 135, light_elevation = 45, raking_azimuth = 180, raking_elevation = 10;
+  app.add_option("--mode", mode,
+                 "view mode: relit (the gallery's lights), light (a directional light: the left "
+                 "mouse button drags it; --light-azimuth/--light-elevation), specular (specular "
+                 "enhancement under that light), normals (n * 0.5 + 0.5 as RGB), raking (a raking "
+                 "light: --raking-azimuth/--raking-elevation)");
+  app.add_option("--light-azimuth", light_azimuth,
+                 "light/specular: the light's azimuth in the painting's frame, deg (0 = from the "
+                 "right, 90 = from the top)");
+  app.add_option("--light-elevation", light_elevation,
+                 "light/specular: the light's elevation above the painting, deg");
+  app.add_option("--raking-azimuth", raking_azimuth, "raking: azimuth, deg (180 = from the left)");
+  app.add_option("--raking-elevation", raking_elevation, "raking: elevation, deg");
   bool heatmap = false, show_boxes = false, shadows = false;
   app.add_flag("--heatmap", heatmap, "colour relief by its box's alpha (blue 0 .. red 1)");
   app.add_flag("--show-boxes", show_boxes, "outline the boxes drawn");
@@ -279,6 +338,19 @@ int main(int argc, char** argv) {
     return 1;
   }
   options.technique = *t;
+  auto m = ParseViewMode(mode);
+  if (!m) {
+    std::fprintf(stderr, "digitize-viewer: %s\n", m.error().message.c_str());
+    return 1;
+  }
+  options.mode = *m;
+  options.light_direction = LightDirectionFromAngles(light_azimuth, light_elevation);
+  options.raking_azimuth_deg = raking_azimuth;
+  options.raking_elevation_deg = raking_elevation;
+  if (Status valid = options.Validate(); !valid.ok()) {
+    std::fprintf(stderr, "digitize-viewer: %s\n", valid.message().c_str());
+    return 1;
+  }
   options.alpha_heatmap = heatmap;
   options.show_boxes = show_boxes;
   options.shadows = shadows;

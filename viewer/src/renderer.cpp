@@ -212,8 +212,62 @@ Result<Technique> ParseTechnique(std::string_view name) {
                "' (mesh, relief, bump, hybrid, adaptive, screen-error)"};
 }
 
+const char* ToString(ViewMode m) {
+  switch (m) {
+    case ViewMode::kRelit:
+      return "relit";
+    case ViewMode::kLight:
+      return "light";
+    case ViewMode::kSpecular:
+      return "specular";
+    case ViewMode::kNormals:
+      return "normals";
+    case ViewMode::kRaking:
+      return "raking";
+  }
+  return "?";
+}
+
+Result<ViewMode> ParseViewMode(std::string_view name) {
+  for (ViewMode m : kAllViewModes)
+    if (name == ToString(m)) return m;
+  return Error{"unknown view mode '" + std::string(name) +
+               "' (relit, light, specular, normals, raking)"};
+}
+
+Vec3d LightDirectionFromAngles(double azimuth_deg, double elevation_deg) {
+  const double a = azimuth_deg * kPi / 180, e = elevation_deg * kPi / 180;
+  return Vec3d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
+}
+
+Vec3d HemisphereLightDirection(double x, double y) {
+  if (!std::isfinite(x) || !std::isfinite(y)) return Vec3d::UnitZ();
+  const double r = std::hypot(x, y);
+  const double rim = std::cos(kMinLightElevationDeg * kPi / 180);
+  if (r > rim) return LightDirectionFromAngles(std::atan2(y, x) * 180 / kPi, kMinLightElevationDeg);
+  return Vec3d(x, y, std::sqrt(std::max(0.0, 1 - r * r))).normalized();
+}
+
 Status RenderOptions::Validate() const {
   auto finite = [](double v) { return std::isfinite(v); };
+  if (!light_direction.allFinite() || std::abs(light_direction.norm() - 1) > 1e-6 ||
+      light_direction.z() <= 0)
+    return Error{
+        "light_direction must be a unit vector with z > 0 (towards the light, canvas "
+        "frame)"};
+  if (!finite(light_irradiance) || light_irradiance < 0)
+    return Error{"light_irradiance must be >= 0, got " + FormatNumber(light_irradiance)};
+  if (!finite(raking_elevation_deg) || raking_elevation_deg <= 0 || raking_elevation_deg > 90)
+    return Error{"raking_elevation_deg must be in (0, 90], got " +
+                 FormatNumber(raking_elevation_deg)};
+  if (!finite(raking_azimuth_deg))
+    return Error{"raking_azimuth_deg must be finite, got " + FormatNumber(raking_azimuth_deg)};
+  if (!finite(specular_diffuse) || specular_diffuse < 0 || !finite(specular_gain) ||
+      specular_gain < 0)
+    return Error{"specular_diffuse and specular_gain must be >= 0, got " +
+                 FormatNumber(specular_diffuse) + ", " + FormatNumber(specular_gain)};
+  if (!finite(specular_sharpen) || specular_sharpen < 1)
+    return Error{"specular_sharpen must be >= 1, got " + FormatNumber(specular_sharpen)};
   if (!finite(k) || k <= 0) return Error{"k must be finite and > 0, got " + FormatNumber(k)};
   if (!finite(eps_min) || !finite(eps_max) || eps_min < 0 || eps_max <= eps_min)
     return Error{"need 0 <= eps_min < eps_max, got " + FormatNumber(eps_min) + ", " +
@@ -439,6 +493,7 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
       rho_d[4 * i + k] = d[k];
       rho_s[4 * i + k] = s[k];
     }
+    rho_s[4 * i + 3] = float(static_cast<int>(pack.maps.model.data[from]));  // Shade's model
     surface[4 * i + 3] = hh;
     rho_d[4 * i + 3] = shaded ? 1.0f : 0.0f;
     for (int k = 0; k < 4; ++k) lobe[4 * i + k] = c[k];
@@ -524,23 +579,42 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   const Mat4d clip_from_world = ClipFromWorld(camera);
 
-  std::vector<Vec3d> light_pos;
-  std::vector<Vec3f> light_int;
-  for (const Light& l : lights) {
-    if (l.type != LightType::kPoint || int(light_pos.size()) == kMaxLights) continue;
-    light_pos.push_back(l.position_mm);
-    light_int.push_back(l.intensity);
+  std::vector<Light> scene_lights;
+  for (const Light& l : lights)
+    if (int(scene_lights.size()) < kMaxLights) scene_lights.push_back(l);
+  // The mode's light replaces the scene's on the paintings; it is given in their canvas frame.
+  std::vector<Light> mode_lights;
+  if (options.mode != ViewMode::kRelit && options.mode != ViewMode::kNormals) {
+    Light l;
+    l.type = LightType::kDirectional;
+    l.direction =
+        options.mode == ViewMode::kRaking
+            ? LightDirectionFromAngles(options.raking_azimuth_deg, options.raking_elevation_deg)
+            : options.light_direction;
+    l.irradiance = Vec3f::Constant(float(options.light_irradiance));
+    mode_lights.push_back(l);
   }
-  auto set_lights = [&](GLuint prog, const RigidTransform& frame_from_world) {
-    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_num_lights"), int(light_pos.size()));
-    for (size_t i = 0; i < light_pos.size(); ++i) {
-      const Vec3f pos = frame_from_world.Apply(light_pos[i]).cast<float>();
-      const std::string idx = "[" + std::to_string(i) + "]";
+  // Lights given in `frame_from_light` coordinates, moved into the program's frame: a point's
+  // position (u_light_pos) and intensity, or a direction towards the light and its irradiance.
+  auto set_lights = [&](GLuint prog, const std::vector<Light>& ls,
+                        const RigidTransform& frame_from_light, bool points_only) {
+    int n = 0;
+    for (const Light& l : ls) {
+      const bool directional = l.type == LightType::kDirectional;
+      if (points_only && directional) continue;
+      const Vec3f pos = (directional ? frame_from_light.ApplyToDirection(l.direction)
+                                     : frame_from_light.Apply(l.position_mm))
+                            .cast<float>();
+      const Vec3f& power = directional ? l.irradiance : l.intensity;
+      const std::string idx = "[" + std::to_string(n++) + "]";
       glProgramUniform3fv(prog, glGetUniformLocation(prog, ("u_light_pos" + idx).c_str()), 1,
                           pos.data());
       glProgramUniform3fv(prog, glGetUniformLocation(prog, ("u_light_int" + idx).c_str()), 1,
-                          light_int[i].data());
+                          power.data());
+      glProgramUniform1i(prog, glGetUniformLocation(prog, ("u_light_directional" + idx).c_str()),
+                         directional ? 1 : 0);
     }
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_num_lights"), n);
   };
   auto set_mat = [](GLuint prog, const char* name, const Mat4d& mat) {
     const Mat4f f = mat.cast<float>();  // column-major, as GL expects
@@ -556,7 +630,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_eye"), 1, eye.data());
     glProgramUniform1f(prog, glGetUniformLocation(prog, "u_ambient"), float(options.ambient));
     glProgramUniform1i(prog, glGetUniformLocation(prog, "u_flat"), 0);
-    set_lights(prog, RigidTransform{});
+    set_lights(prog, scene_lights, RigidTransform{}, /*points_only=*/true);
     glBindVertexArray(m.scene_vao);
     glDrawArraysInstanced(GL_TRIANGLES, 0, 36, GLsizei(m.scene_count));
   }
@@ -587,7 +661,21 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                          float(options.linear_step_texels));
       glProgramUniform1i(prog, glGetUniformLocation(prog, "u_shadow_max_steps"),
                          options.max_linear_steps);
-      set_lights(prog, canvas_from_world);
+      if (options.mode == ViewMode::kRelit)
+        set_lights(prog, scene_lights, canvas_from_world, false);
+      else
+        set_lights(prog, mode_lights, RigidTransform{}, false);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_mode"),
+                         options.mode == ViewMode::kNormals    ? 2
+                         : options.mode == ViewMode::kSpecular ? 1
+                                                               : 0);
+      glProgramUniform3f(prog, glGetUniformLocation(prog, "u_specular"),
+                         float(options.specular_diffuse), float(options.specular_gain),
+                         float(options.specular_sharpen));
+      // ggx.h's clamps, so that the shader's GGX is its formula with its constants.
+      glProgramUniform3f(prog, glGetUniformLocation(prog, "u_ggx_limits"), kGgxMinAlpha,
+                         kGgxMaxAlpha, kGgxMinCos);
+      glProgramUniform1f(prog, glGetUniformLocation(prog, "u_max_brdf"), kMaxBrdf);
     };
     stats.boxes_total += int(p.boxes.size());
 

@@ -8,8 +8,11 @@
 // of part 0 as `digitize:*` string attributes, so `oiiotool --info -v`, `exrheader` or any EXR
 // viewer can look inside. Parts:
 //   "surface"      : H (height, mm), NX, NY (unit normal's x, y; nz = sqrt(1 - nx^2 - ny^2)),
-//                    M (texel state + 4 x fit status, small integers: exact in half)
-//   "reflectance"  : rho_d.R/G/B, rho_s.R/G/B, lobe.cx, lobe.cy, lobe.k (cz = 1 by the gauge)
+//                    M (texel state + 4 x fit status + 64 x reflectance model, small integers:
+//                    exact in half; version 1 packs have no model term: every texel Lafortune)
+//   "reflectance"  : rho_d.R/G/B, rho_s.R/G/B, lobe.cx, lobe.cy, lobe.k (cz = 1 by the gauge);
+//                    a GGX texel (reflectance_maps.h) stores F0 in rho_s, alpha in lobe.k and
+//                    cx = cy = 0
 //   "boxes"        : one pixel per n x n relief cell (float): present (0/1), h_max (mm),
 //                    u_max, v_max (texel of the highest point, relative to the cell's corner);
 //                    boxes are the present cells, so no box list can claim more than the grid
@@ -22,6 +25,7 @@
 // channel group (PackQuantisation), a stated relative error bound per group, so the lossless
 // compressor has less to store; the read-back values are exactly the quantised ones.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -36,7 +40,9 @@
 
 namespace digitize {
 
-inline constexpr int kPackVersion = 1;
+// 2: the reflectance model per texel (M's model term, digitize:models). Version 1 packs still read
+// (every texel Lafortune).
+inline constexpr int kPackVersion = 2;
 inline constexpr const char* kPackFormatName = "digitize.pack";
 
 // Physical bounds on what a pack may state (docs/formats.md, "What the reader checks"). A pack is
@@ -113,7 +119,10 @@ struct PackSummary {
   size_t box_count = 0;
   PackEncoding encoding = PackEncoding::kHalf;
   PackQuantisation quantisation;
-  std::string gauge;  // "lafortune1:cz=1,tangent"
+  std::string gauge;  // "lafortune1: f = ..."
+  // Texels per reflectance model (indexed by ReflectanceModel), from digitize:models (version 1:
+  // every texel Lafortune); ReadPack checks it against the pixels.
+  std::array<int64_t, kReflectanceModelCount> texels_by_model{};
   PackProvenance provenance;
   uint64_t file_bytes = 0;
   int raw_bytes_per_texel = 0;  // uncompressed texel channels of the surface + reflectance parts
@@ -141,7 +150,9 @@ Result<PackSummary> InspectPack(const std::filesystem::path& path,
                                 const PackReadOptions& options = {});
 
 // The values a pack written with `options` reads back as (half rounding, then quantisation):
-// what the relighting error of an encoding is measured with, without writing a file.
+// what the relighting error of an encoding is measured with, without writing a file. GGX texels
+// stay valid after rounding: alpha is rounded up to the first kept value >= kGgxMinAlpha when
+// rounding to nearest fell below it, F0 stays <= 1, cx = cy = 0 exactly.
 // Precondition: pack.Validate() is ok.
 Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options);
 

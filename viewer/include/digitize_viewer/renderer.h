@@ -10,10 +10,12 @@
 // SHADING (shared by every technique, so transitions do not pop, and identical to RenderRelit so
 // every image has a measurable error against the Embree reference):
 //   - the shading point P is the technique's surface point in the canvas frame (mm);
-//   - texel = nearest texel of P's continuous texel coordinates (per-texel reflectance; texels
+//   - texel = nearest texel of P's continuous texel coordinates (per-texel reflectance and model:
+//     Lafortune or GGX, evaluated as lafortune.h / ggx.h with the same clamps; texels
 //     kOutside are black), normal = bilinear interpolation of the pack's normals at P,
 //     renormalised, tangent frame as tangent_frame.h (cz = 1 gauge of the pack's lobes);
-//   - v = towards the eye from P, l = towards each point light from P, E = I / |light - P|^2,
+//   - v = towards the eye from P, l = towards each point light from P, E = I / |light - P|^2
+//     (a directional light: l its direction, E its irradiance),
 //     radiance = sum over lights of f_r(v, l) max(0, n.l) E  (0 where n.v <= 0), plus
 //     `ambient` x rho_d (0 by default: the reference has no ambient term);
 //   - with `shadows`, a light whose ray from P is blocked by the height field contributes 0;
@@ -71,8 +73,49 @@ inline constexpr Technique kAllTechniques[] = {
 const char* ToString(Technique t);
 Result<Technique> ParseTechnique(std::string_view name);
 
+// What a fragment shows of its surface point (a "look", the same for every technique). The RTI
+// tools' views; each but kRelit lights the painting with one directional light given in the
+// painting's canvas frame (x right, y up, z out of the canvas), so it is the same on every wall.
+enum class ViewMode {
+  kRelit,     // the scene's lights (point or directional), shaded as RenderRelit
+  kLight,     // one directional light from light_direction (the window drags it with the mouse)
+  kSpecular,  // specular enhancement under the kLight light: rho_d to grey x specular_diffuse,
+              // the specular term brightened (specular_gain) and sharpened (specular_sharpen)
+  kNormals,   // the interpolated unit normal as colour: rgb = n * 0.5 + 0.5 (canvas frame), unlit
+  kRaking,    // one directional light raking_elevation_deg above the canvas plane from
+              // raking_azimuth_deg (0 = from +x, 90 = from +y)
+};
+inline constexpr ViewMode kAllViewModes[] = {
+    ViewMode::kRelit, ViewMode::kLight, ViewMode::kSpecular, ViewMode::kNormals, ViewMode::kRaking};
+// "relit", "light", "specular", "normals", "raking"
+const char* ToString(ViewMode m);
+Result<ViewMode> ParseViewMode(std::string_view name);
+
+// The kLight direction for a cursor at (x, y) in [-1, 1]^2 over the view (x right, y up): the
+// point of the unit disc under the cursor lifted onto the upper hemisphere, (x, y, sqrt(1 - x^2 -
+// y^2)); a cursor outside the disc gives the rim's direction at kMinLightElevationDeg. Unit, z > 0.
+inline constexpr double kMinLightElevationDeg = 2.0;
+Vec3d HemisphereLightDirection(double x, double y);
+// Unit direction towards a light elevation_deg above the canvas plane from azimuth_deg (0 = +x).
+Vec3d LightDirectionFromAngles(double azimuth_deg, double elevation_deg);
+
 struct RenderOptions {
   Technique technique = Technique::kHybridAdaptive;
+  ViewMode mode = ViewMode::kRelit;
+  // kLight / kSpecular: unit direction towards the light, canvas frame, z > 0. Irradiance pi: a
+  // white Lambertian texel facing the light reads radiance 1 (paper white, as StandardLight).
+  Vec3d light_direction = Vec3d(-0.5, 0.5, 1.0).normalized();
+  double light_irradiance = 3.14159265358979323846;
+  // kRaking (degrees): 10 deg is the conservators' raking light; azimuth 180 = from the left.
+  double raking_elevation_deg = 10.0;
+  double raking_azimuth_deg = 180.0;
+  // kSpecular: diffuse = grey(rho_d) x specular_diffuse (grey: Rec. 709 luminance); the specular
+  // term x specular_gain, its lobe sharpened by specular_sharpen (Lafortune: k x s, rho_s scaled
+  // by (s k + 2) / (k + 2) so the lobe keeps its energy before the gain; GGX: alpha / s, at least
+  // kGgxMinAlpha, F0 x gain).
+  double specular_diffuse = 0.3;
+  double specular_gain = 2.0;
+  double specular_sharpen = 2.0;
   // Adaptive rule (paper eq. 2). r is dimensionless (a ratio of lengths); with K = 1, eps_min =
   // 0.004 and eps_max = 0.008 a 1.75 mm-high impasto appears (alpha > 0) once the camera is
   // closer than ~44 cm above the bump plane and is fully relief-mapped below ~22 cm.
@@ -114,7 +157,9 @@ struct RenderOptions {
                                // the bump plane dark grey
   bool show_boxes = false;     // draw the drawn boxes' edges (yellow)
 
-  // Finite, k > 0, 0 <= eps_min < eps_max, max_error_px > 0, steps in range.
+  // Finite, k > 0, 0 <= eps_min < eps_max, max_error_px > 0, steps in range; light_direction
+  // unit with z > 0, light_irradiance >= 0, raking elevation in (0, 90], specular_diffuse and
+  // specular_gain >= 0, specular_sharpen >= 1.
   Status Validate() const;
 };
 
@@ -163,7 +208,8 @@ class Renderer {
   void SetSceneBoxes(const std::vector<SceneBox>& boxes);  // the room; empty = none
 
   // Draws everything into the currently bound framebuffer (viewport = camera size), clearing it
-  // to black. Point lights only (directional lights are ignored), at most kMaxLights.
+  // to black. Point and directional lights (world frame), at most kMaxLights; options.mode may
+  // replace them on the paintings (ViewMode). The room is lit by the point lights.
   FrameStats Draw(const ViewCamera& camera, const std::vector<Light>& lights,
                   const RenderOptions& options);
   // Whether Render can produce a width x height image here: both sides at least 1 and within
