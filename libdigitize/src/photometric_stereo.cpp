@@ -132,17 +132,22 @@ PixelFit FitPixel(PixelScratch& s, const PhotometricStereoOptions& o) {
   // Step 1: rank trimming, by the order statistics of a copy of the usable values.
   for (size_t r = 0; r < n_usable; ++r) s.tmp[r] = s.g[s.order[r]];
   auto begin = s.tmp.begin();
-  auto at = [&](size_t rank) {
-    std::nth_element(begin, begin + static_cast<std::ptrdiff_t>(rank),
-                     begin + static_cast<std::ptrdiff_t>(n_usable));
+  // The median first; the low and high ranks then lie in its two halves (nth_element leaves the
+  // smaller values before it), so each later search covers half the samples.
+  const size_t mid = n_usable / 2;
+  auto at = [&](size_t rank, size_t from, size_t to) {
+    std::nth_element(begin + static_cast<std::ptrdiff_t>(from),
+                     begin + static_cast<std::ptrdiff_t>(rank),
+                     begin + static_cast<std::ptrdiff_t>(to));
     return s.tmp[rank];
   };
-  const size_t lo = static_cast<size_t>(std::floor(o.low_quantile * n_usable));
+  const size_t lo = std::min(static_cast<size_t>(std::floor(o.low_quantile * n_usable)), mid);
   const size_t hi = std::max(lo + 1, static_cast<size_t>(std::ceil(o.high_quantile * n_usable)));
-  const double median = at(n_usable / 2);
-  const double floor_g = std::max(at(std::min(lo, n_usable - 1)), o.shadow_ratio * median);
+  const double median = at(mid, 0, n_usable);
+  const double floor_g = std::max(lo < mid ? at(lo, 0, mid) : median, o.shadow_ratio * median);
   // Samples from rank hi up are dropped: every value above the hi-th (ties kept, as ranks are).
-  const double ceil_g = hi < n_usable ? at(hi) : std::numeric_limits<double>::infinity();
+  const double ceil_g = hi < n_usable ? (hi > mid ? at(hi, mid + 1, n_usable) : median)
+                                      : std::numeric_limits<double>::infinity();
   for (size_t r = 0; r < n_usable; ++r) {
     const int i = s.order[r];
     if (s.g[i] >= floor_g && s.g[i] < ceil_g) s.inlier[i] = 1;
@@ -163,16 +168,25 @@ PixelFit FitPixel(PixelScratch& s, const PhotometricStereoOptions& o) {
     fit.inliers = count;
     return fit;
   }
-  // Step 2: reselection by shading and residual, until the inliers stop changing.
+  // Step 2: reselection by shading and residual, until the inliers stop changing. The robust
+  // sigma: 1.4826 MAD of the trimmed set's residuals in the first round (it may still hold
+  // outliers), then the RMS of the inliers' residuals (they passed the cut; a median per round
+  // cost more than the solves).
   for (int it = 0; it < o.reselect_iterations; ++it) {
     const double albedo = b.norm();
     if (!(albedo > 0)) break;
     const Vec3d n = b / albedo;
     size_t k = 0;
+    double sum2 = 0;
     for (size_t i = 0; i < m; ++i) {
-      if (s.inlier[i]) s.tmp[k++] = std::abs(s.g[i] - b.dot(s.l[i]));
+      if (!s.inlier[i]) continue;
+      const double r = s.g[i] - b.dot(s.l[i]);
+      s.tmp[k++] = std::abs(r);
+      sum2 += r * r;
     }
-    const double sigma = std::max(kMadToSigma * Median(s.tmp, k), o.noise_floor * albedo);
+    const double scale = it == 0 ? kMadToSigma * Median(s.tmp, k)
+                                 : std::sqrt(sum2 / static_cast<double>(std::max<size_t>(k, 1)));
+    const double sigma = std::max(scale, o.noise_floor * albedo);
     const double limit = o.outlier_sigmas * sigma;
     bool changed = false;
     for (size_t i = 0; i < m; ++i) {

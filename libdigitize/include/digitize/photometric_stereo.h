@@ -20,8 +20,9 @@
 //   2. Reselection, `reselect_iterations` times: with the current b, a sample is an inlier when
 //      its predicted shading n.l_i >= min_shading (attached shadows and grazing light, where the
 //      Lambertian model and the quantisation are worst, are out) and its residual is within
-//      outlier_sigmas robust sigmas (1.4826 MAD of the residuals of the previous inliers, floored
-//      at noise_floor x a); then least squares again on the inliers.
+//      outlier_sigmas sigmas (1.4826 MAD of the trimmed set's residuals in the first round, then
+//      the RMS residual of the current inliers, which passed the cut; floored at noise_floor x a);
+//      then least squares again on the inliers, until the inliers stop changing.
 //   Why not IRLS with a symmetric robust loss: at low light elevations a third or more of a
 //   pixel's samples can be cast shadows, and a least-squares start that includes them tilts the
 //   normal away from the shadowing relief by tens of degrees, further than a Huber / Tukey loss
