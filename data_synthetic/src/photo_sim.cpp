@@ -393,8 +393,10 @@ std::vector<PaintMaterial> GgxPaintMaterials() {
 
 GgxPaintingCase MakeGgxPaintingCase(int resolution_px, uint64_t seed) {
   GgxPaintingCase c;
-  c.painting.width_mm = 200;
-  c.painting.height_mm = 200;
+  // 400 mm: a ~4 mm texel pitch, so the frame's shadow band (25 mm raise, lights down to 15 deg)
+  // and the relief's steepest walls cover a few texels of the 96, not a tenth of the canvas.
+  c.painting.width_mm = 400;
+  c.painting.height_mm = 400;
   c.painting.resolution_px = resolution_px;
   c.painting.seed = seed;
   c.painting.region_count = 6;

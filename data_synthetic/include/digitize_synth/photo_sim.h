@@ -151,7 +151,7 @@ struct SyntheticPhotoSet {
   std::string Brief() const;
 };
 
-// The "GGX painting": a small square canvas (96 x 96 texels by default) in 6 regions painted with
+// The "GGX painting": a square 400 mm canvas (96 x 96 texels by default) in 6 regions painted with
 // GgxPaintMaterials() (varnish, satin, green, ochre, gold, Lambertian), photographed by 2
 // cameras (arc +-30 deg) under 48 point lights at ~1.2 px per texel, 8-bit sRGB, sensor noise
 // sigma 0.002, 16 held-out images.
