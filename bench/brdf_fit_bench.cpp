@@ -227,17 +227,19 @@ void BM_Fit(benchmark::State& state, Truth truth, bool select, BrdfFitMethod met
 
 void WriteCsv(const std::filesystem::path& path) {
   std::ostringstream out;
-  out << "truth,models,method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,cpu_us_per_"
+  out << "truth,models,method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,"
+         "cpu_us_per_"
          "texel,relight_rmse,"
          "relight_median_texel,relight_p90_texel,relight_p99_texel,log_k_error_median,converged_"
          "pct,diffuse_only_pct,"
-         "too_few_pct,clamped_k_pct,iteration_limit_pct,failed_pct,mean_iterations,lafortune_lobe_pct,"
+         "too_few_pct,clamped_k_pct,iteration_limit_pct,failed_pct,mean_iterations,lafortune_lobe_"
+         "pct,"
          "ggx_lobe_pct\n";
   for (const Row& r : g_rows) {
     const BrdfFitSummary& s = r.summary;
-    out << r.truth << "," << r.models << "," << r.method << "," << r.noise_sigma << "," << s.texels << ","
-        << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << "," << r.seconds
-        << "," << 1e6 * r.seconds / static_cast<double>(s.texels) << ","
+    out << r.truth << "," << r.models << "," << r.method << "," << r.noise_sigma << "," << s.texels
+        << "," << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << ","
+        << r.seconds << "," << 1e6 * r.seconds / static_cast<double>(s.texels) << ","
         << 1e6 * r.cpu_seconds / static_cast<double>(s.texels) << "," << r.relight_rmse << ","
         << r.relight_median << "," << r.relight_p90 << "," << r.relight_p99 << ","
         << r.param_log_k_median;
@@ -246,7 +248,8 @@ void WriteCsv(const std::filesystem::path& path) {
           << 100.0 * static_cast<double>(s.count_by_status[i]) / static_cast<double>(s.texels);
     out << "," << s.mean_iterations;
     for (int m = 0; m < kReflectanceModelCount; ++m)
-      out << "," << 100.0 * static_cast<double>(s.lobes_by_model[m]) / static_cast<double>(s.texels);
+      out << ","
+          << 100.0 * static_cast<double>(s.lobes_by_model[m]) / static_cast<double>(s.texels);
     out << "\n";
   }
   std::ofstream(path) << out.str();
@@ -254,12 +257,13 @@ void WriteCsv(const std::filesystem::path& path) {
 }
 
 void PrintSideBySide() {
-  std::printf("\n%-9s %-9s %-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise", "us/texel",
-              "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)", "p99 (texel)",
-              "brief");
+  std::printf("\n%-9s %-9s %-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise",
+              "us/texel", "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)",
+              "p99 (texel)", "brief");
   for (const Row& r : g_rows)
-    std::printf("%-9s %-9s %-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n", r.truth.c_str(),
-                r.models.c_str(), r.method.c_str(), r.noise_sigma, 1e6 * r.seconds / static_cast<double>(r.summary.texels),
+    std::printf("%-9s %-9s %-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n",
+                r.truth.c_str(), r.models.c_str(), r.method.c_str(), r.noise_sigma,
+                1e6 * r.seconds / static_cast<double>(r.summary.texels),
                 1e6 * r.cpu_seconds / static_cast<double>(r.summary.texels), r.relight_rmse,
                 r.relight_median, r.relight_p90, r.relight_p99, r.summary.BriefReport().c_str());
 }

@@ -89,8 +89,8 @@ std::vector<RegionScore> ScoreByRegion(const Case& c, int margin) {
         if (!(relit.mask.data[p] && relit.rgb.data[p].maxCoeff() > 0.0f)) mask.data[p] = 0;
       masks.push_back(std::move(mask));
     }
-    auto score = EvaluateHeldOut(canvas, c.painting.normals, c.fit.maps, {}, c.photos.held_out,
-                                 masks);
+    auto score =
+        EvaluateHeldOut(canvas, c.painting.normals, c.fit.maps, {}, c.photos.held_out, masks);
     EXPECT_TRUE(score.ok());
     out.push_back({m == n ? "all" : c.photos.materials[m].name, score->psnr_db, score->pixels});
   }
@@ -354,9 +354,10 @@ TEST(ReflectanceFitGgx, QuantisationTermExplainsRounding) {
     quantised += lobe(with_term);
     bic += lobe(BrdfFitOptions{});
   }
-  std::printf("  lobes on 100 8-bit Lambertian texels: %d before, %d with the quantisation term, %d "
-              "with BIC\n",
-              before, quantised, bic);
+  std::printf(
+      "  lobes on 100 8-bit Lambertian texels: %d before, %d with the quantisation term, %d "
+      "with BIC\n",
+      before, quantised, bic);
   EXPECT_GT(before, 50);
   EXPECT_LE(quantised, 5);
   EXPECT_LE(bic, 2);
@@ -379,10 +380,8 @@ TEST(ReflectanceFitGgx, OptionsAreValidated) {
   o.fit_ggx = o.fit_lafortune = false;  // allowed: diffuse only
   EXPECT_TRUE(o.Validate().ok());
   std::mt19937 rng(1);
-  const TexelFit fit =
-      FitBrdfTexel(RenderGgx({Vec3f::Constant(0.1f), Vec3f::Constant(0.04f), 0.1f}, 2, 48,
-                             0.002f, rng),
-                   o);
+  const TexelFit fit = FitBrdfTexel(
+      RenderGgx({Vec3f::Constant(0.1f), Vec3f::Constant(0.04f), 0.1f}, 2, 48, 0.002f, rng), o);
   EXPECT_EQ(fit.status, TexelFitStatus::kDiffuseOnly);
 }
 

@@ -46,8 +46,8 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
       if (m >= n_materials) continue;
       ++count[m];
       if (status == TexelFitStatus::kDiffuseOnly) ++diffuse[m];
-      const bool fitted_ggx = fitted.model(x, y) == ReflectanceModel::kGgx &&
-                              status != TexelFitStatus::kDiffuseOnly;
+      const bool fitted_ggx =
+          fitted.model(x, y) == ReflectanceModel::kGgx && status != TexelFitStatus::kDiffuseOnly;
       if (fitted_ggx) ++ggx[m];
       if (truth.materials[m].is_measured) continue;
       const LafortuneParams f = fitted.At(x, y), g = truth.truth.At(tx, ty);

@@ -38,10 +38,10 @@ GgxSolver GgxSolverFor(BrdfFitMethod method) {
 namespace {
 
 using brdf_detail::Bounds;
+using brdf_detail::ChannelSums;
 using brdf_detail::GgxFitOutcome;
 using brdf_detail::GgxSolverFor;
 using brdf_detail::GgxStart;
-using brdf_detail::ChannelSums;
 using brdf_detail::kPriorC;
 using brdf_detail::LinearFit;
 using brdf_detail::LobeFitOutcome;
@@ -204,7 +204,8 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
           best.model = ReflectanceModel::kLafortune;
           best.params = p;
           best.rms_error = Rms(problem.RadianceSse(lobe.linear, Columns::kLobe), problem.n());
-          if (lobe.shape.t <= bounds.t_lo + t_tolerance || lobe.shape.t >= bounds.t_hi - t_tolerance)
+          if (lobe.shape.t <= bounds.t_lo + t_tolerance ||
+              lobe.shape.t >= bounds.t_hi - t_tolerance)
             best.status = TexelFitStatus::kClampedK;
           else if (!lobe.converged)
             best.status = TexelFitStatus::kIterationLimit;
@@ -306,9 +307,9 @@ Status BrdfFitOptions::Validate() const {
                  " (GGX roughness), got " + FormatNumber(ggx_alpha_min)};
   if (!(std::isfinite(ggx_alpha_max) && ggx_alpha_max > ggx_alpha_min &&
         ggx_alpha_max <= kGgxMaxAlpha))
-    return Error{"ggx_alpha_max must be finite, > ggx_alpha_min and <= " +
-                 FormatNumber(kGgxMaxAlpha) + " (GGX roughness), got " +
-                 FormatNumber(ggx_alpha_max)};
+    return Error{
+        "ggx_alpha_max must be finite, > ggx_alpha_min and <= " + FormatNumber(kGgxMaxAlpha) +
+        " (GGX roughness), got " + FormatNumber(ggx_alpha_max)};
   if (std::isnan(model_penalty_per_parameter) || std::isinf(model_penalty_per_parameter))
     return Error{"model_penalty_per_parameter must be finite (chi-square units; < 0 = BIC), got " +
                  FormatNumber(model_penalty_per_parameter)};

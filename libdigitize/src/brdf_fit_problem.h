@@ -226,7 +226,8 @@ class TexelProblem {
   double RadianceSse(const LinearFit& fit, Columns kind) {
     double sse = 0;
     for (int c = 0; c < 3; ++c) {
-      const float a = static_cast<float>(fit.channel[c].a), b = static_cast<float>(fit.channel[c].b);
+      const float a = static_cast<float>(fit.channel[c].a),
+                  b = static_cast<float>(fit.channel[c].b);
       if (kind == Columns::kDiffuse)
         sse += ((e(c) * a - L(c)) / View(kW + c)).square().sum();
       else if (kind == Columns::kLobe)
@@ -289,7 +290,8 @@ class TexelProblem {
   double GgxSse(const LinearFit& fit) {
     double sse = 0;
     for (int c = 0; c < 3; ++c) {
-      const float a = static_cast<float>(fit.channel[c].a), b = static_cast<float>(fit.channel[c].b);
+      const float a = static_cast<float>(fit.channel[c].a),
+                  b = static_cast<float>(fit.channel[c].b);
       sse += (e(c) * (a + b * View(kU) + View(kO)) - L(c)).square().sum();
     }
     return sse;

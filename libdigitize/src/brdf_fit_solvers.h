@@ -46,9 +46,9 @@ struct GgxStart {
   double t = 0, bracket_lo = 0, bracket_hi = 0, t_lo = 0, t_hi = 0;
 };
 struct GgxFitOutcome {
-  double t = 0;       // log alpha, inside the bounds
-  LinearFit linear;   // (rho_d, F0) per channel for it
-  double sse = 0;     // weighted squared error, TexelProblem::GgxSse (every solver alike)
+  double t = 0;      // log alpha, inside the bounds
+  LinearFit linear;  // (rho_d, F0) per channel for it
+  double sse = 0;    // weighted squared error, TexelProblem::GgxSse (every solver alike)
   int iterations = 0;
   bool converged = false;
   bool failed = false;

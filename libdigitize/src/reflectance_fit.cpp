@@ -173,8 +173,9 @@ bool OnCodes(const Photo& photo, int code_max) {
   for (size_t i = 0; i < n; i += stride) {
     for (int c = 0; c < 3; ++c) {
       const double v = std::clamp(static_cast<double>(photo.rgb.data[i][c]), 0.0, 1.0);
-      const double encoded =
-          !srgb ? v : v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+      const double encoded = !srgb            ? v
+                             : v <= 0.0031308 ? 12.92 * v
+                                              : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
       const float code = static_cast<float>(std::round(encoded * code_max) / code_max);
       const float decoded = srgb ? SrgbToLinear(code) : code;
       if (std::abs(decoded - photo.rgb.data[i][c]) > 1e-6f + 1e-5f * std::abs(decoded))
@@ -462,9 +463,10 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
   std::filesystem::create_directories(dir, ec);
   if (ec) return Error{dir.string() + ": cannot create the output folder: " + ec.message()};
   const ReflectanceMaps& m = result.maps;
-  const ImageMetadata meta = {{"digitize:model", "lafortune-1-lobe (gauge cz = 1) or ggx, per texel (model.png)"},
-                              {"digitize:frame", "texel tangent frame (docs/formats.md)"},
-                              {"digitize:version", DIGITIZE_VERSION}};
+  const ImageMetadata meta = {
+      {"digitize:model", "lafortune-1-lobe (gauge cz = 1) or ggx, per texel (model.png)"},
+      {"digitize:frame", "texel tangent frame (docs/formats.md)"},
+      {"digitize:version", DIGITIZE_VERSION}};
   auto with = [&](const char* quantity) {
     ImageMetadata q = meta;
     q["digitize:quantity"] = quantity;

@@ -156,7 +156,7 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
         const Vec3f v_local = frame.ToLocal(v_canvas).cast<float>();
         const Vec3f l_local = frame.ToLocal(l_canvas).cast<float>();
         if (!(v_local.z() > 0.0f && l_local.z() > 0.0f)) continue;  // radiance 0
-        const Vec3f f = maps.Evaluate(ix, iy, v_local, l_local);  // under the texel's model
+        const Vec3f f = maps.Evaluate(ix, iy, v_local, l_local);
         const Vec3f radiance = (f * l_local.z()).cwiseProduct(light.IrradianceAt(p_scan));
         if (!options.shadows) {
           rgb[u] = radiance;

@@ -180,7 +180,7 @@ struct BrdfFitOptions {
   int photo_code_max = 0;
   bool photo_codes_srgb = true;
   double photo_compression_sigma_codes = 0.0;
-  int num_threads = 0;                 // worker threads; 0 = all cores
+  int num_threads = 0;  // worker threads; 0 = all cores
   Status Validate() const;
 };
 

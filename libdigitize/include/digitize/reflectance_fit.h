@@ -61,8 +61,8 @@ struct ReflectanceFitOptions {
 // spread over the image) decodes from one; the coarsest over the set is taken (samples do not
 // say which photo they came from). JPEG files (.jpg/.jpeg) are lossy. Float photos: code_max 0.
 struct PhotoQuantisation {
-  int code_max = 0;   // 255, 65535, or 0 (float or not on codes: no quantisation term)
-  bool srgb = true;   // the codes are sRGB (else linear)
+  int code_max = 0;  // 255, 65535, or 0 (float or not on codes: no quantisation term)
+  bool srgb = true;  // the codes are sRGB (else linear)
   bool lossy = false;
 };
 PhotoQuantisation DetectPhotoQuantisation(const PhotoSet& photos);
@@ -86,14 +86,14 @@ struct ReflectanceFitReport {
   // are rejected, n.l <= 0); their entries, in set order.
   std::vector<std::string> light_below_canvas;
   SampleStats samples;
-  BrdfFitSummary fit;          // over the fitted texels; fit.seconds = wall time fitting
+  BrdfFitSummary fit;              // over the fitted texels; fit.seconds = wall time fitting
   PhotoQuantisation quantisation;  // what the noise model used (quantisation_from_photos)
-  size_t dark_outliers = 0;    // samples removed as unmodelled shadows
-  size_t texels_refitted = 0;  // texels that lost samples to it
-  size_t texels_outside = 0;   // kOutside texels, not fitted
-  double seconds_tracer = 0;   // building the ray-tracing structure
-  double seconds_samples = 0;  // gathering samples, rays included (wall)
-  double seconds_fit = 0;      // fitting (wall)
+  size_t dark_outliers = 0;        // samples removed as unmodelled shadows
+  size_t texels_refitted = 0;      // texels that lost samples to it
+  size_t texels_outside = 0;       // kOutside texels, not fitted
+  double seconds_tracer = 0;       // building the ray-tracing structure
+  double seconds_samples = 0;      // gathering samples, rays included (wall)
+  double seconds_fit = 0;          // fitting (wall)
   double seconds_total = 0;
   // One line: "1.05 M texels x 64 photos: 97.8 % converged, 1.9 % diffuse-only, ...; samples
   // 2.1 s, fit 4.9 s, total 7.4 s".
