@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <random>
 #include <string>
 #include <vector>
@@ -25,6 +26,7 @@
 #include "digitize_synth/photo_sim.h"
 #include "digitize_synth/reflectance_truth.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -383,6 +385,28 @@ TEST(ReflectanceFitGgx, OptionsAreValidated) {
   const TexelFit fit = FitBrdfTexel(
       RenderGgx({Vec3f::Constant(0.1f), Vec3f::Constant(0.04f), 0.1f}, 2, 48, 0.002f, rng), o);
   EXPECT_EQ(fit.status, TexelFitStatus::kDiffuseOnly);
+}
+
+// The fit's outputs keep each texel's model (model.png): GGX texels read back as GGX with their
+// F0 and alpha; a folder without model.png (written before GGX) reads as all Lafortune.
+TEST(ReflectanceFitGgx, ModelMapRoundTrips) {
+  const std::filesystem::path dir = test::FreshScratchDir("ggx_model_map");
+  ReflectanceFitResult result;
+  result.maps = ReflectanceMaps::Zeros(3, 2);
+  result.maps.SetGgx(1, 0, {Vec3f(0.1f, 0.2f, 0.3f), Vec3f(1.0f, 0.78f, 0.34f), 0.2f});
+  result.maps.status(1, 0) = TexelFitStatus::kConverged;
+  ASSERT_TRUE(WriteReflectanceOutputs(dir, result, {}, {}).ok());
+  auto back = ReadReflectanceMaps(dir);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->model(1, 0), ReflectanceModel::kGgx);
+  EXPECT_EQ(back->model(0, 0), ReflectanceModel::kLafortune);
+  EXPECT_EQ(back->GgxAt(1, 0).f0, Vec3f(1.0f, 0.78f, 0.34f));
+  EXPECT_EQ(back->GgxAt(1, 0).alpha, 0.2f);
+  std::filesystem::remove(dir / "model.png");
+  auto old = ReadReflectanceMaps(dir);
+  ASSERT_TRUE(old.ok()) << old.error().message;
+  EXPECT_EQ(old->model(1, 0), ReflectanceModel::kLafortune);
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
