@@ -9,6 +9,12 @@
 // sigma = 0.002 on radiance (I = 1), plus a noise-free run. Relighting error: RMSE of f_r (n.l)
 // over 16 held-out (view, light) pairs per texel, same elevation range, I = 1.
 //
+// Two truths and two candidate sets. Truth "lafortune" is the above; truth "ggx" draws paints
+// that follow GGX (ggx.h): 20 % Lambertian, 20 % metal (rho_d = 0, coloured F0 0.5-1), the rest
+// dielectric (F0 0.04 over rho_d as above), alpha log-uniform in [0.03, 0.6]. Models
+// "lafortune" is the one-lobe fit alone (as before GGX existed: fit_ggx = false), "select" the
+// default per-texel choice between diffuse, Lafortune and GGX (brdf_fit.h, MODEL CHOICE).
+//
 //   brdf_fit_bench [--texels=20000] [--threads=2] [--csv-dir=docs] [google benchmark flags]
 #include <benchmark/benchmark.h>
 
@@ -24,6 +30,7 @@
 #include <vector>
 
 #include "digitize/brdf_fit.h"
+#include "digitize/ggx.h"
 #include "digitize/lafortune.h"
 
 namespace {
@@ -42,13 +49,25 @@ Vec3f RotateZ(const Vec3f& d, float angle) {
           std::sin(angle) * d.x() + std::cos(angle) * d.y(), d.z()};
 }
 
+enum class Truth { kLafortune, kGgx };
+
+struct TruthBrdf {
+  bool ggx = false;
+  LafortuneParams lafortune;
+  GgxParams g;
+  Vec3f Evaluate(const Vec3f& v, const Vec3f& l) const {
+    return ggx ? EvaluateGgx(g, v, l) : EvaluateLafortune(lafortune, v, l);
+  }
+  bool has_lobe() const { return ggx || lafortune.rho_s.maxCoeff() > 0; }
+};
+
 struct Dataset {
   BrdfSamples samples;
-  std::vector<LafortuneParams> truth;
+  std::vector<TruthBrdf> truth;
   std::vector<Vec3f> held_out_view, held_out_light;  // kHeldOutPerTexel per texel
 };
 
-Dataset MakeDataset(int texels, float noise_sigma, uint32_t seed) {
+Dataset MakeDataset(Truth kind, int texels, float noise_sigma, uint32_t seed) {
   std::vector<Vec3f> lights, views;
   const float z_min = std::sin(kMinElevationDeg * kPi / 180.0f);
   const float golden = kPi * (3.0f - std::sqrt(5.0f));
@@ -73,9 +92,22 @@ Dataset MakeDataset(int texels, float noise_sigma, uint32_t seed) {
   d.samples.samples.reserve(static_cast<size_t>(texels) * 64);
   std::vector<BrdfSample> texel;
   for (int t = 0; t < texels; ++t) {
-    LafortuneParams p;
+    TruthBrdf truth;
+    LafortuneParams& p = truth.lafortune;
     p.rho_d = Vec3f(0.02f + 0.18f * u(rng), 0.02f + 0.18f * u(rng), 0.02f + 0.18f * u(rng));
-    if (u(rng) >= 0.2f) {
+    if (kind == Truth::kGgx) {
+      const float pick = u(rng);
+      if (pick >= 0.2f) {
+        truth.ggx = true;
+        truth.g.alpha = 0.03f * std::pow(20.0f, u(rng));
+        truth.g.rho_d = p.rho_d;
+        truth.g.f0 = Vec3f::Constant(0.04f);
+        if (pick < 0.4f) {  // a metal
+          truth.g.rho_d = Vec3f::Zero();
+          truth.g.f0 = Vec3f(0.5f + 0.5f * u(rng), 0.5f + 0.5f * u(rng), 0.5f + 0.5f * u(rng));
+        }
+      }
+    } else if (u(rng) >= 0.2f) {
       p.k = 2.0f * std::pow(250.0f, u(rng));
       p.cx = -1.0f + 0.15f * u(rng);
       p.cy = -1.0f + 0.15f * u(rng);
@@ -83,7 +115,7 @@ Dataset MakeDataset(int texels, float noise_sigma, uint32_t seed) {
       p.rho_s = Vec3f::Constant(albedo * (p.k + 2.0f) / (2.0f * kPi));
       for (int c = 0; c < 3; ++c) p.rho_s[c] *= 0.9f + 0.2f * u(rng);
     }
-    d.truth.push_back(p);
+    d.truth.push_back(truth);
     const float azimuth = 2.0f * kPi * u(rng);
     texel.clear();
     for (const Vec3f& view : views)
@@ -92,7 +124,7 @@ Dataset MakeDataset(int texels, float noise_sigma, uint32_t seed) {
         s.view_dir = RotateZ(view, azimuth);
         s.light_dir = RotateZ(light, azimuth);
         s.irradiance = Vec3f::Constant(s.light_dir.z());
-        s.radiance = EvaluateLafortune(p, s.view_dir, s.light_dir).cwiseProduct(s.irradiance);
+        s.radiance = truth.Evaluate(s.view_dir, s.light_dir).cwiseProduct(s.irradiance);
         for (int c = 0; c < 3; ++c) s.radiance[c] += noise_sigma * noise(rng);
         texel.push_back(s);
       }
@@ -106,6 +138,7 @@ Dataset MakeDataset(int texels, float noise_sigma, uint32_t seed) {
 }
 
 struct Row {
+  std::string truth, models;
   std::string method;
   float noise_sigma = 0;
   double seconds = 0, cpu_seconds = 0;
@@ -114,6 +147,11 @@ struct Row {
   BrdfFitSummary summary;
 };
 std::vector<Row> g_rows;
+
+Vec3f EvaluateFit(const BrdfFitResult& r, size_t t, const Vec3f& v, const Vec3f& l) {
+  return r.model[t] == ReflectanceModel::kGgx ? EvaluateGgx(r.ggx[t], v, l)
+                                              : EvaluateLafortune(r.params[t], v, l);
+}
 
 // Global RMSE over texels x held-out pairs x channels, and the per-texel median and 90th
 // percentile, of f_r (n.l).
@@ -126,14 +164,14 @@ void MeasureRelighting(const Dataset& d, const BrdfFitResult& r, Row* row) {
     for (int i = 0; i < kHeldOutPerTexel; ++i) {
       const Vec3f& v = d.held_out_view[t * kHeldOutPerTexel + i];
       const Vec3f& l = d.held_out_light[t * kHeldOutPerTexel + i];
-      texel_sum +=
-          ((EvaluateLafortune(r.params[t], v, l) - EvaluateLafortune(d.truth[t], v, l)) * l.z())
-              .squaredNorm();
+      texel_sum += ((EvaluateFit(r, t, v, l) - d.truth[t].Evaluate(v, l)) * l.z()).squaredNorm();
     }
     sum += texel_sum;
     per_texel[t] = std::sqrt(texel_sum / (3.0 * kHeldOutPerTexel));
-    if (d.truth[t].rho_s.maxCoeff() > 0 && r.params[t].rho_s.maxCoeff() > 0)
-      log_k_error.push_back(std::abs(std::log(r.params[t].k / d.truth[t].k)));
+    const LafortuneParams& truth = d.truth[t].lafortune;
+    if (!d.truth[t].ggx && truth.rho_s.maxCoeff() > 0 &&
+        r.model[t] == ReflectanceModel::kLafortune && r.params[t].rho_s.maxCoeff() > 0)
+      log_k_error.push_back(std::abs(std::log(r.params[t].k / truth.k)));
   }
   row->relight_rmse = std::sqrt(sum / (3.0 * kHeldOutPerTexel * d.truth.size()));
   std::sort(per_texel.begin(), per_texel.end());
@@ -146,10 +184,12 @@ void MeasureRelighting(const Dataset& d, const BrdfFitResult& r, Row* row) {
   }
 }
 
-void BM_Fit(benchmark::State& state, BrdfFitMethod method, float noise_sigma) {
-  const Dataset d = MakeDataset(g_texels, noise_sigma, 1234);
+void BM_Fit(benchmark::State& state, Truth truth, bool select, BrdfFitMethod method,
+            float noise_sigma) {
+  const Dataset d = MakeDataset(truth, g_texels, noise_sigma, 1234);
   BrdfFitOptions options;
   options.method = method;
+  options.fit_ggx = select;
   options.noise_sigma = std::max(noise_sigma, 1e-4f);  // noise-free: a floor for the chi2 test
   options.num_threads = g_threads;
   BrdfFitResult last;
@@ -170,6 +210,8 @@ void BM_Fit(benchmark::State& state, BrdfFitMethod method, float noise_sigma) {
   row.cpu_seconds = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC /
                     static_cast<double>(state.iterations());
   row.method = method == BrdfFitMethod::kFast ? "fast" : "ceres";
+  row.truth = truth == Truth::kGgx ? "ggx" : "lafortune";
+  row.models = select ? "select" : "lafortune";
   row.noise_sigma = noise_sigma;
   row.seconds = seconds / static_cast<double>(state.iterations());
   row.summary = last.summary;
@@ -185,35 +227,43 @@ void BM_Fit(benchmark::State& state, BrdfFitMethod method, float noise_sigma) {
 
 void WriteCsv(const std::filesystem::path& path) {
   std::ostringstream out;
-  out << "method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,cpu_us_per_"
+  out << "truth,models,method,noise_sigma,texels,samples_per_texel,threads,seconds,us_per_texel,"
+         "cpu_us_per_"
          "texel,relight_rmse,"
          "relight_median_texel,relight_p90_texel,relight_p99_texel,log_k_error_median,converged_"
          "pct,diffuse_only_pct,"
-         "too_few_pct,clamped_k_pct,iteration_limit_pct,failed_pct,mean_iterations\n";
+         "too_few_pct,clamped_k_pct,iteration_limit_pct,failed_pct,mean_iterations,lafortune_lobe_"
+         "pct,"
+         "ggx_lobe_pct\n";
   for (const Row& r : g_rows) {
     const BrdfFitSummary& s = r.summary;
-    out << r.method << "," << r.noise_sigma << "," << s.texels << ","
-        << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << "," << r.seconds
-        << "," << 1e6 * r.seconds / static_cast<double>(s.texels) << ","
+    out << r.truth << "," << r.models << "," << r.method << "," << r.noise_sigma << "," << s.texels
+        << "," << (s.texels ? s.samples_total / s.texels : 0) << "," << g_threads << ","
+        << r.seconds << "," << 1e6 * r.seconds / static_cast<double>(s.texels) << ","
         << 1e6 * r.cpu_seconds / static_cast<double>(s.texels) << "," << r.relight_rmse << ","
         << r.relight_median << "," << r.relight_p90 << "," << r.relight_p99 << ","
         << r.param_log_k_median;
     for (int i = 0; i < kTexelFitStatusCount; ++i)
       out << ","
           << 100.0 * static_cast<double>(s.count_by_status[i]) / static_cast<double>(s.texels);
-    out << "," << s.mean_iterations << "\n";
+    out << "," << s.mean_iterations;
+    for (int m = 0; m < kReflectanceModelCount; ++m)
+      out << ","
+          << 100.0 * static_cast<double>(s.lobes_by_model[m]) / static_cast<double>(s.texels);
+    out << "\n";
   }
   std::ofstream(path) << out.str();
   std::printf("wrote %s\n", path.c_str());
 }
 
 void PrintSideBySide() {
-  std::printf("\n%-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise", "us/texel",
-              "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)", "p99 (texel)",
-              "brief");
+  std::printf("\n%-9s %-9s %-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise",
+              "us/texel", "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)",
+              "p99 (texel)", "brief");
   for (const Row& r : g_rows)
-    std::printf("%-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n", r.method.c_str(),
-                r.noise_sigma, 1e6 * r.seconds / static_cast<double>(r.summary.texels),
+    std::printf("%-9s %-9s %-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n",
+                r.truth.c_str(), r.models.c_str(), r.method.c_str(), r.noise_sigma,
+                1e6 * r.seconds / static_cast<double>(r.summary.texels),
                 1e6 * r.cpu_seconds / static_cast<double>(r.summary.texels), r.relight_rmse,
                 r.relight_median, r.relight_p90, r.relight_p99, r.summary.BriefReport().c_str());
 }
@@ -234,19 +284,23 @@ int main(int argc, char** argv) {
     else
       rest.push_back(argv[i]);
   }
-  for (float noise : {0.002f, 0.0f}) {
-    const std::string suffix = noise > 0 ? "/noise_0.002" : "/noise_free";
-    benchmark::RegisterBenchmark(("brdf_fit/fast" + suffix).c_str(), BM_Fit, BrdfFitMethod::kFast,
-                                 noise)
-        ->Unit(benchmark::kMillisecond)
-        ->Iterations(5)
-        ->UseRealTime();
-    benchmark::RegisterBenchmark(("brdf_fit/ceres" + suffix).c_str(), BM_Fit,
-                                 BrdfFitMethod::kCeresReference, noise)
-        ->Unit(benchmark::kMillisecond)
-        ->Iterations(1)
-        ->UseRealTime();
-  }
+  for (Truth truth : {Truth::kLafortune, Truth::kGgx})
+    for (bool select : {false, true})
+      for (float noise : {0.002f, 0.0f}) {
+        const std::string suffix = std::string(truth == Truth::kGgx ? "/truth_ggx" : "") +
+                                   (select ? "/select" : "/lafortune") +
+                                   (noise > 0 ? "/noise_0.002" : "/noise_free");
+        benchmark::RegisterBenchmark(("brdf_fit/fast" + suffix).c_str(), BM_Fit, truth, select,
+                                     BrdfFitMethod::kFast, noise)
+            ->Unit(benchmark::kMillisecond)
+            ->Iterations(5)
+            ->UseRealTime();
+        benchmark::RegisterBenchmark(("brdf_fit/ceres" + suffix).c_str(), BM_Fit, truth, select,
+                                     BrdfFitMethod::kCeresReference, noise)
+            ->Unit(benchmark::kMillisecond)
+            ->Iterations(1)
+            ->UseRealTime();
+      }
   int rest_argc = static_cast<int>(rest.size());
   benchmark::Initialize(&rest_argc, rest.data());
   benchmark::RunSpecifiedBenchmarks();

@@ -350,8 +350,66 @@ struct RenderCounts {
 // ---------------------------------------------------------------------------------------------
 
 Vec3f PaintMaterial::Evaluate(const Vec3f& v, const Vec3f& l) const {
-  return is_measured ? EvaluateMeasuredLafortune(measured, v, l)
-                     : EvaluateLafortune(lafortune, v, l);
+  if (is_measured) return EvaluateMeasuredLafortune(measured, v, l);
+  return is_ggx ? EvaluateGgx(ggx, v, l) : EvaluateLafortune(lafortune, v, l);
+}
+
+std::vector<PaintMaterial> GgxPaintMaterials() {
+  // name, diffuse albedo (RGB; BRDF = albedo / pi), F0 (RGB), alpha. Dielectric paints and
+  // varnishes reflect F0 ~ 0.04 (refractive index 1.5) in grey; the metal has no diffuse term.
+  struct Spec {
+    const char* name;
+    Vec3f albedo, f0;
+    float alpha;
+  };
+  const Vec3f dielectric = Vec3f::Constant(0.04f);
+  const Spec specs[] = {
+      {"ggx varnish a0.05 (dark umber)", {0.09f, 0.065f, 0.05f}, dielectric, 0.05f},
+      {"ggx satin a0.15 (vermilion)", {0.50f, 0.13f, 0.08f}, dielectric, 0.15f},
+      {"ggx green earth a0.3", {0.16f, 0.30f, 0.17f}, dielectric, 0.3f},
+      {"ggx yellow ochre a0.6", {0.62f, 0.50f, 0.28f}, dielectric, 0.6f},
+      {"ggx gold leaf a0.2 (metal)", {0.0f, 0.0f, 0.0f}, {1.0f, 0.78f, 0.34f}, 0.2f},
+      {"lambertian (lead white)", {0.80f, 0.77f, 0.68f}, Vec3f::Zero(), 0.0f},
+      {"ggx glaze a0.02 (madder)", {0.25f, 0.04f, 0.06f}, dielectric, 0.02f},
+  };
+  std::vector<PaintMaterial> out;
+  for (const Spec& s : specs) {
+    PaintMaterial m;
+    m.name = s.name;
+    if (s.alpha > 0.0f) {
+      m.is_ggx = true;
+      m.ggx.rho_d = s.albedo / static_cast<float>(kPi);
+      m.ggx.f0 = s.f0;
+      m.ggx.alpha = s.alpha;
+      // The one-lobe stand-in (unused by the renderer): the diffuse term.
+      m.lafortune.rho_d = m.ggx.rho_d;
+    } else {
+      m.lafortune.rho_d = s.albedo / static_cast<float>(kPi);  // rho_s = 0: Lambertian
+    }
+    out.push_back(std::move(m));
+  }
+  return out;
+}
+
+GgxPaintingCase MakeGgxPaintingCase(int resolution_px, uint64_t seed) {
+  GgxPaintingCase c;
+  // 400 mm: a ~4 mm texel pitch, so the frame's shadow band (25 mm raise, lights down to 15 deg)
+  // and the relief's steepest walls cover a few texels of the 96, not a tenth of the canvas.
+  c.painting.width_mm = 400;
+  c.painting.height_mm = 400;
+  c.painting.resolution_px = resolution_px;
+  c.painting.seed = seed;
+  c.painting.region_count = 6;
+  c.photos.cameras = 2;
+  c.photos.camera_arc_deg = 30;
+  c.photos.lights = 48;
+  c.photos.pixels_per_texel = 1.2;
+  c.photos.noise_sigma = 0.002;
+  c.photos.encoding = PhotoEncoding::kSrgb8;
+  c.photos.held_out_lights = 8;
+  c.photos.seed = seed;
+  c.materials = GgxPaintMaterials();
+  return c;
 }
 
 std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured) {
@@ -496,6 +554,16 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
                                               std::to_string(materials.size()));
   for (const PaintMaterial& m : materials) {
     if (m.is_measured) continue;
+    if (m.is_ggx) {
+      const GgxParams& g = m.ggx;
+      DIGITIZE_CHECK(g.rho_d.allFinite() && (g.rho_d.array() >= 0.0f).all() &&
+                         (g.f0.array() >= 0.0f).all() && (g.f0.array() <= 1.0f).all() &&
+                         g.alpha >= kGgxMinAlpha && g.alpha <= kGgxMaxAlpha,
+                     "SimulatePhotoSet: material \"" + m.name +
+                         "\": GGX needs rho_d >= 0, F0 in [0, 1], alpha in [" +
+                         FormatNumber(kGgxMinAlpha) + ", " + FormatNumber(kGgxMaxAlpha) + "]");
+      continue;
+    }
     const Status s = m.lafortune.Validate();
     DIGITIZE_CHECK(s.ok(), "SimulatePhotoSet: material \"" + m.name + "\": " + s.message());
   }
@@ -523,6 +591,9 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
         out.truth.Set(x, y, diffuse);
         out.truth.status(x, y) = TexelFitStatus::kDiffuseOnly;
         out.measured_texel(x, y) = 1;
+      } else if (m.is_ggx) {
+        out.truth.SetGgx(x, y, m.ggx);
+        out.truth.status(x, y) = TexelFitStatus::kConverged;
       } else {
         out.truth.Set(x, y, m.lafortune);
         out.truth.status(x, y) = TexelFitStatus::kConverged;

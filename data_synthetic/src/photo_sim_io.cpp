@@ -120,6 +120,11 @@ json MaterialsJson(const SyntheticPhotoSet& set) {
       j["measured_name"] = m.measured.name;
       j["diffuse_albedo"] = Vec(m.measured.diffuse_albedo);
       j["lobes"] = lobes;
+    } else if (m.is_ggx) {
+      j["model"] = "ggx";
+      j["rho_d"] = Vec(m.ggx.rho_d);
+      j["f0"] = Vec(m.ggx.f0);
+      j["alpha"] = m.ggx.alpha;
     } else {
       const LafortuneParams& p = m.lafortune;
       j["model"] = "lafortune-1";
@@ -140,6 +145,9 @@ json MaterialsJson(const SyntheticPhotoSet& set) {
        {{"lafortune-1",
          "f = rho_d + rho_s max(0, cx vx lx + cy vy ly + cz vz lz)^k, tangent frame "
          "(tangent_frame.h), cz = 1"},
+        {"ggx",
+         "f = rho_d + F(v.h) D(n.h) G1(n.v) G1(n.l) / (4 n.v n.l): GGX, Schlick F0, Smith "
+         "(ggx.h), tangent frame"},
         {"lafortune-measured",
          "f = diffuse_albedo / pi + sum_i max(0, cxy_i (vx lx + vy ly) + cz_i vz lz)^n_i"}}},
       {"region_rule", "texel material = paint region % material count (material.png)"},

@@ -26,8 +26,8 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
     const Painting& painting) {
   const size_t n_materials = truth.materials.size();
   std::vector<std::vector<double>> rho_d(n_materials), albedo(n_materials), logk(n_materials),
-      lobe(n_materials);
-  std::vector<size_t> count(n_materials, 0), diffuse(n_materials, 0);
+      lobe(n_materials), f0(n_materials), log_alpha(n_materials);
+  std::vector<size_t> count(n_materials, 0), diffuse(n_materials, 0), ggx(n_materials, 0);
   const RigidTransform true_from_fitted =
       truth.canvas_from_scan * fitted_canvas_from_scan.Inverse();
   const HeightField& true_field = painting.truth;
@@ -46,9 +46,21 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
       if (m >= n_materials) continue;
       ++count[m];
       if (status == TexelFitStatus::kDiffuseOnly) ++diffuse[m];
+      const bool fitted_ggx =
+          fitted.model(x, y) == ReflectanceModel::kGgx && status != TexelFitStatus::kDiffuseOnly;
+      if (fitted_ggx) ++ggx[m];
       if (truth.materials[m].is_measured) continue;
       const LafortuneParams f = fitted.At(x, y), g = truth.truth.At(tx, ty);
       rho_d[m].push_back((f.rho_d - g.rho_d).norm() / std::max(0.01f, g.rho_d.norm()));
+      if (truth.materials[m].is_ggx) {
+        if (fitted_ggx) {
+          const GgxParams fg = fitted.GgxAt(x, y), tg = truth.materials[m].ggx;
+          f0[m].push_back(std::abs(fg.f0.mean() - tg.f0.mean()));
+          log_alpha[m].push_back(std::abs(std::log10(fg.alpha / tg.alpha)));
+        }
+        continue;
+      }
+      if (fitted_ggx) continue;  // Lafortune truth, GGX fit: only the PSNR compares them
       albedo[m].push_back(std::abs(SpecularAlbedo(f.rho_s, f.k) - SpecularAlbedo(g.rho_s, g.k)));
       if (g.rho_s.maxCoeff() > 0) {
         logk[m].push_back(std::abs(std::log10(std::max(f.k, 1e-3f) / g.k)));
@@ -70,6 +82,10 @@ std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(
     e.log10_k_abs_median = Median(logk[m]);
     e.lobe_abs_median = Median(lobe[m]);
     e.diffuse_only_share = static_cast<double>(diffuse[m]) / static_cast<double>(count[m]);
+    e.is_ggx = truth.materials[m].is_ggx;
+    e.ggx_share = static_cast<double>(ggx[m]) / static_cast<double>(count[m]);
+    e.f0_abs_median = Median(f0[m]);
+    e.log10_alpha_abs_median = Median(log_alpha[m]);
     out.push_back(e);
   }
   return out;
@@ -82,6 +98,12 @@ std::string FormatReflectanceAccuracy(const std::vector<RegionReflectanceError>&
     if (e.is_measured) {
       std::snprintf(b, sizeof b, "  %-22s %8zu texels  (measured 3-lobe: no one-lobe truth)\n",
                     e.name.c_str(), e.texels);
+    } else if (e.is_ggx) {
+      std::snprintf(b, sizeof b,
+                    "  %-22s %8zu texels  rho_d %5.1f %%  GGX-fitted %5.1f %%: F0 +-%.4f  "
+                    "|log10 alpha| %.3f  diffuse-only %4.1f %%\n",
+                    e.name.c_str(), e.texels, 100.0 * e.rho_d_rel_median, 100.0 * e.ggx_share,
+                    e.f0_abs_median, e.log10_alpha_abs_median, 100.0 * e.diffuse_only_share);
     } else {
       char lobe[64] = "|log10 k| n/a (no lobe)";  // matte paint: no true k or direction
       if (e.has_lobe)

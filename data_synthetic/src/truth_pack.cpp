@@ -18,6 +18,9 @@ ReflectanceMaps TruthReflectanceMaps(const Painting& painting,
         diffuse.rho_d = m.measured.diffuse_albedo / static_cast<float>(3.14159265358979323846);
         maps.Set(x, y, diffuse);
         maps.status(x, y) = TexelFitStatus::kDiffuseOnly;
+      } else if (m.is_ggx) {
+        maps.SetGgx(x, y, m.ggx);
+        maps.status(x, y) = TexelFitStatus::kConverged;
       } else {
         maps.Set(x, y, m.lafortune);
         maps.status(x, y) = TexelFitStatus::kConverged;

@@ -29,12 +29,19 @@ LobeSolver LobeSolverFor(BrdfFitMethod method) {
   return method == BrdfFitMethod::kCeresReference ? FitLobeCeres : FitLobeVarPro;
 }
 
+GgxSolver GgxSolverFor(BrdfFitMethod method) {
+  return method == BrdfFitMethod::kCeresReference ? FitGgxCeres : FitGgxVarPro;
+}
+
 }  // namespace brdf_detail
 
 namespace {
 
 using brdf_detail::Bounds;
 using brdf_detail::ChannelSums;
+using brdf_detail::GgxFitOutcome;
+using brdf_detail::GgxSolverFor;
+using brdf_detail::GgxStart;
 using brdf_detail::kPriorC;
 using brdf_detail::LinearFit;
 using brdf_detail::LobeFitOutcome;
@@ -84,6 +91,36 @@ Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
   return init;
 }
 
+// The GGX grid over log alpha: a factor 1.5 between points (12 points over 0.01 .. 1) keeps
+// the reduced cost unimodal between a point's neighbours in every case we measured, so Brent's
+// method on that bracket finds the minimum the grid points at.
+constexpr double kGgxGridFactor = 1.5;
+
+GgxStart GgxGridInit(TexelProblem& problem, const BrdfFitOptions& options) {
+  GgxStart start;
+  start.t_lo = std::log(options.ggx_alpha_min);
+  start.t_hi = std::log(options.ggx_alpha_max);
+  const double step = std::log(kGgxGridFactor);
+  std::array<double, 64> costs{}, ts{};
+  const int count = std::min<int>(
+      costs.size(), 1 + static_cast<int>(std::ceil((start.t_hi - start.t_lo) / step - 1e-9)));
+  int best = 0;
+  for (int i = 0; i < count; ++i) {
+    ts[i] = std::min(start.t_lo + i * step, start.t_hi);
+    problem.SolveGgx(std::exp(ts[i]), nullptr, &costs[i]);
+    if (costs[i] < costs[best]) best = i;
+  }
+  start.t = ts[best];
+  start.bracket_lo = ts[std::max(0, best - 1)];
+  start.bracket_hi = ts[std::min(count - 1, best + 1)];
+  return start;
+}
+
+// Free parameters of each candidate, for the model choice (per texel, all three channels).
+constexpr int kDiffuseParameters = 3;    // rho_d
+constexpr int kLafortuneParameters = 9;  // rho_d, rho_s, cx, cy, k
+constexpr int kGgxParameters = 7;        // rho_d, F0, alpha
+
 LafortuneParams DiffuseParams(const LinearFit& fit, double k) {
   LafortuneParams p;
   for (int c = 0; c < 3; ++c) p.rho_d[c] = static_cast<float>(fit.channel[c].a);
@@ -102,6 +139,7 @@ float Rms(double sse, int n) {
 
 TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& options,
                   Workspace& ws) {
+  using Columns = TexelProblem::Columns;
   TexelProblem problem(samples, options, ws);
   TexelFit out;
   out.samples_used = problem.n();
@@ -109,13 +147,14 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
   LinearFit diffuse;
   const double diffuse_sse = problem.FitDiffuse(&diffuse);
   out.params = DiffuseParams(diffuse, options.k_min);
-  out.rms_error = Rms(diffuse_sse, problem.n());
+  out.rms_error = Rms(problem.RadianceSse(diffuse, Columns::kDiffuse), problem.n());
   if (problem.n() < options.min_samples) {
     out.status = TexelFitStatus::kTooFewSamples;
     return out;
   }
   // Chi-square test: with Gaussian noise sigma, the squared error of a right model over
-  // dof = 3N - 3 residuals has mean dof sigma^2 and std sqrt(2 dof) sigma^2.
+  // dof = 3N - 3 residuals has mean dof sigma^2 and std sqrt(2 dof) sigma^2. The squared error
+  // is weighted by the noise model (quantisation included), so sigma is the sensor's.
   const double dof = 3.0 * problem.n() - 3.0;
   const double sigma2 = options.noise_sigma * options.noise_sigma;
   if (options.diffuse_chi2_sigmas >= 0.0 &&
@@ -123,44 +162,97 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
     out.status = TexelFitStatus::kDiffuseOnly;
     return out;
   }
-  const Bounds bounds{-1.0, 1.0, std::log(options.k_min), std::log(options.k_max)};
-  const Shape init = GridInit(problem, bounds);
-  const LobeFitOutcome lobe = LobeSolverFor(options.method)(problem, init, bounds, options);
-  out.iterations = lobe.iterations;
-  LafortuneParams p;
-  for (int c = 0; c < 3; ++c) {
-    p.rho_d[c] = static_cast<float>(lobe.linear.channel[c].a);
-    p.rho_s[c] = static_cast<float>(lobe.linear.channel[c].b);
+  // The model choice (brdf_fit.h, MODEL CHOICE): chi-square plus a cost per free parameter.
+  // Without a noise level (sigma 0) the smallest error wins.
+  const double chi2_scale = 1.0 / std::max(sigma2, 1e-30);
+  const double penalty = options.model_penalty_per_parameter >= 0.0
+                             ? options.model_penalty_per_parameter
+                             : std::log(3.0 * problem.n());
+  double best_score = diffuse_sse * chi2_scale + penalty * kDiffuseParameters;
+  bool any_candidate = false, all_failed = true;
+  const double t_tolerance = 1e-4;  // in log k / log alpha: within 0.01 % of a bound
+  TexelFit best = out;
+  best.status = TexelFitStatus::kDiffuseOnly;
+  int iterations = 0;
+
+  if (options.fit_lafortune) {
+    any_candidate = true;
+    const Bounds bounds{-1.0, 1.0, std::log(options.k_min), std::log(options.k_max)};
+    const Shape init = GridInit(problem, bounds);
+    const LobeFitOutcome lobe = LobeSolverFor(options.method)(problem, init, bounds, options);
+    iterations += lobe.iterations;
+    LafortuneParams p;
+    for (int c = 0; c < 3; ++c) {
+      p.rho_d[c] = static_cast<float>(lobe.linear.channel[c].a);
+      p.rho_s[c] = static_cast<float>(lobe.linear.channel[c].b);
+    }
+    p.cx = static_cast<float>(lobe.shape.cx);
+    p.cy = static_cast<float>(lobe.shape.cy);
+    p.cz = 1.0f;
+    p.k = static_cast<float>(std::exp(lobe.shape.t));
+    // A solver that ends worse than the diffuse fit (a feasible point with no penalty; the slack
+    // is float rounding of two sums) is not trusted, nor a non-finite one.
+    const bool failed = lobe.failed || !Finite(p) || !std::isfinite(lobe.sse) ||
+                        lobe.sse > diffuse_sse * (1.0 + 1e-5) + 1e-30;
+    if (!failed) {
+      all_failed = false;
+      if (lobe.linear.any_lobe()) {
+        problem.SetShape(lobe.shape, false);
+        const double score = lobe.sse * chi2_scale + penalty * kLafortuneParameters;
+        if (score < best_score) {
+          best_score = score;
+          best.model = ReflectanceModel::kLafortune;
+          best.params = p;
+          best.rms_error = Rms(problem.RadianceSse(lobe.linear, Columns::kLobe), problem.n());
+          if (lobe.shape.t <= bounds.t_lo + t_tolerance ||
+              lobe.shape.t >= bounds.t_hi - t_tolerance)
+            best.status = TexelFitStatus::kClampedK;
+          else if (!lobe.converged)
+            best.status = TexelFitStatus::kIterationLimit;
+          else
+            best.status = TexelFitStatus::kConverged;
+        }
+      }
+    }
   }
-  p.cx = static_cast<float>(lobe.shape.cx);
-  p.cy = static_cast<float>(lobe.shape.cy);
-  p.cz = 1.0f;
-  p.k = static_cast<float>(std::exp(lobe.shape.t));
-  if (lobe.failed || !Finite(p) || !std::isfinite(lobe.sse)) {
-    out.status = TexelFitStatus::kFailed;  // keeps the diffuse fallback set above
-    return out;
+  if (options.fit_ggx) {
+    any_candidate = true;
+    problem.PrepareGgx();
+    const GgxStart start = GgxGridInit(problem, options);
+    const GgxFitOutcome ggx = GgxSolverFor(options.method)(problem, start, options);
+    iterations += ggx.iterations;
+    GgxParams g;
+    for (int c = 0; c < 3; ++c) {
+      g.rho_d[c] = static_cast<float>(ggx.linear.channel[c].a);
+      g.f0[c] = static_cast<float>(ggx.linear.channel[c].b);
+    }
+    g.alpha = static_cast<float>(std::exp(ggx.t));
+    const bool failed = ggx.failed || !std::isfinite(ggx.sse) || !g.rho_d.allFinite() ||
+                        !g.f0.allFinite() || !std::isfinite(g.alpha);
+    if (!failed) {
+      all_failed = false;
+      const double score = ggx.sse * chi2_scale + penalty * kGgxParameters;
+      if (score < best_score) {
+        best_score = score;
+        best.model = ReflectanceModel::kGgx;
+        best.ggx = g;
+        best.params = LafortuneParams{};  // the diffuse floor, for callers that read params only
+        best.params.rho_d = g.rho_d;
+        best.params.k = static_cast<float>(options.k_min);
+        problem.SolveGgx(g.alpha);
+        best.rms_error = Rms(problem.RadianceSse(ggx.linear, Columns::kGgx), problem.n());
+        if (ggx.t <= start.t_lo + t_tolerance || ggx.t >= start.t_hi - t_tolerance)
+          best.status = TexelFitStatus::kClampedK;
+        else if (!ggx.converged)
+          best.status = TexelFitStatus::kIterationLimit;
+        else
+          best.status = TexelFitStatus::kConverged;
+      }
+    }
   }
-  if (lobe.sse > diffuse_sse * (1.0 + 1e-5) + 1e-30) {
-    // Cannot happen for a true minimiser (the diffuse fit is a feasible point with no penalty;
-    // the slack is float rounding of two sums); a solver that ends worse is not trusted.
-    out.status = TexelFitStatus::kFailed;
-    return out;
-  }
-  out.rms_error = Rms(lobe.sse, problem.n());
-  if (!lobe.linear.any_lobe()) {
-    out.params = DiffuseParams(lobe.linear, options.k_min);
-    out.status = TexelFitStatus::kDiffuseOnly;
-    return out;
-  }
-  out.params = p;
-  const double t_tolerance = 1e-4;  // in log k: k within 0.01 % of a bound
-  if (lobe.shape.t <= bounds.t_lo + t_tolerance || lobe.shape.t >= bounds.t_hi - t_tolerance)
-    out.status = TexelFitStatus::kClampedK;
-  else if (!lobe.converged)
-    out.status = TexelFitStatus::kIterationLimit;
-  else
-    out.status = TexelFitStatus::kConverged;
-  return out;
+  best.iterations = iterations;
+  if (any_candidate && all_failed) best.status = TexelFitStatus::kFailed;  // diffuse fallback
+  return best;
 }
 
 }  // namespace
@@ -210,6 +302,23 @@ Status BrdfFitOptions::Validate() const {
   if (!(std::isfinite(lobe_prior_weight) && lobe_prior_weight >= 0.0))
     return Error{"lobe_prior_weight must be finite and >= 0, got " +
                  FormatNumber(lobe_prior_weight)};
+  if (!(std::isfinite(ggx_alpha_min) && ggx_alpha_min >= kGgxMinAlpha))
+    return Error{"ggx_alpha_min must be finite and >= " + FormatNumber(kGgxMinAlpha) +
+                 " (GGX roughness), got " + FormatNumber(ggx_alpha_min)};
+  if (!(std::isfinite(ggx_alpha_max) && ggx_alpha_max > ggx_alpha_min &&
+        ggx_alpha_max <= kGgxMaxAlpha))
+    return Error{
+        "ggx_alpha_max must be finite, > ggx_alpha_min and <= " + FormatNumber(kGgxMaxAlpha) +
+        " (GGX roughness), got " + FormatNumber(ggx_alpha_max)};
+  if (std::isnan(model_penalty_per_parameter) || std::isinf(model_penalty_per_parameter))
+    return Error{"model_penalty_per_parameter must be finite (chi-square units; < 0 = BIC), got " +
+                 FormatNumber(model_penalty_per_parameter)};
+  if (photo_code_max < 0)
+    return Error{"photo_code_max must be >= 0 (top code of the photos; 0 = float photos), got " +
+                 std::to_string(photo_code_max)};
+  if (!(std::isfinite(photo_compression_sigma_codes) && photo_compression_sigma_codes >= 0.0))
+    return Error{"photo_compression_sigma_codes must be finite and >= 0 (codes), got " +
+                 FormatNumber(photo_compression_sigma_codes)};
   if (max_iterations < 1)
     return Error{"max_iterations must be >= 1, got " + std::to_string(max_iterations)};
   if (num_threads < 0)
@@ -232,6 +341,14 @@ std::string BrdfFitSummary::BriefReport() const {
     else
       std::snprintf(buffer, sizeof buffer, "%s%.1f %% %s", out.empty() ? "" : ", ", percent,
                     ToString(static_cast<TexelFitStatus>(s)));
+    out += buffer;
+  }
+  // Which model carries the lobes, when GGX is among them (Lafortune-only fits read as before).
+  if (lobes_by_model[static_cast<size_t>(ReflectanceModel::kGgx)] > 0) {
+    const double n = static_cast<double>(texels);
+    std::snprintf(buffer, sizeof buffer, "; lobes: %.1f %% lafortune, %.1f %% ggx",
+                  100.0 * static_cast<double>(lobes_by_model[0]) / n,
+                  100.0 * static_cast<double>(lobes_by_model[1]) / n);
     out += buffer;
   }
   std::snprintf(buffer, sizeof buffer, "; %.3g s", seconds);
@@ -260,6 +377,8 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
   const size_t texels = samples.texel_count();
   BrdfFitResult result;
   result.params.resize(texels);
+  result.model.resize(texels, ReflectanceModel::kLafortune);
+  result.ggx.resize(texels);
   result.status.resize(texels, TexelFitStatus::kTooFewSamples);
   result.rms_error.resize(texels, 0.0f);
   std::vector<int> iterations(texels, 0), used(texels, 0), saturated(texels, 0);
@@ -273,6 +392,8 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
     for (size_t t = range.begin(); t != range.end(); ++t) {
       const TexelFit fit = FitTexel(samples.Texel(t), options, ws);
       result.params[t] = fit.params;
+      result.model[t] = fit.model;
+      result.ggx[t] = fit.ggx;
       result.status[t] = fit.status;
       result.rms_error[t] = fit.rms_error;
       iterations[t] = fit.iterations;
@@ -302,7 +423,14 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
   for (size_t t = 0; t < texels; ++t) {
     DIGITIZE_CHECK(Finite(result.params[t]) && std::isfinite(result.rms_error[t]),
                    "non-finite BRDF fit output at texel " + std::to_string(t));
+    DIGITIZE_CHECK(result.ggx[t].rho_d.allFinite() && result.ggx[t].f0.allFinite() &&
+                       std::isfinite(result.ggx[t].alpha),
+                   "non-finite GGX fit output at texel " + std::to_string(t));
     ++s.count_by_status[static_cast<size_t>(result.status[t])];
+    if (result.status[t] != TexelFitStatus::kDiffuseOnly &&
+        result.status[t] != TexelFitStatus::kTooFewSamples &&
+        result.status[t] != TexelFitStatus::kFailed)
+      ++s.lobes_by_model[static_cast<size_t>(result.model[t])];
     s.samples_used += used[t];
     s.samples_saturated += saturated[t];
     rms_sum += result.rms_error[t];

@@ -7,6 +7,7 @@
 
 #include "brdf_fit_problem.h"
 #include "brdf_fit_solvers.h"
+#include "digitize/ggx.h"
 #include "digitize/lafortune.h"
 
 namespace digitize::brdf_detail {
@@ -77,7 +78,83 @@ struct SpecularAlbedoPriorCost {
   double weight_;
 };
 
+// One sample's 3 residuals of the GGX model, e_c (rho_d,c + GgxSpecular(F0_c, alpha)) - L_c with
+// alpha = exp(t): the very function the renderers use (ggx.h). e and L carry the noise weights
+// (brdf_fit_problem.h), as on the fast path.
+struct GgxSampleCost {
+  GgxSampleCost(const Vec3f& v, const Vec3f& l, const Vec3f& e, const Vec3f& radiance) {
+    for (int i = 0; i < 3; ++i) {
+      v_[i] = v[i];
+      l_[i] = l[i];
+      e_[i] = e[i];
+      radiance_[i] = radiance[i];
+    }
+  }
+  template <class T>
+  bool operator()(const T* rho_d, const T* f0, const T* log_alpha, T* residual) const {
+    using std::exp;
+    const T alpha = exp(log_alpha[0]);
+    for (int c = 0; c < 3; ++c)
+      residual[c] = T(e_[c]) * (rho_d[c] + GgxSpecular(f0[c], alpha, v_, l_)) - T(radiance_[c]);
+    return true;
+  }
+  static ceres::CostFunction* Create(const Vec3f& v, const Vec3f& l, const Vec3f& e,
+                                     const Vec3f& radiance) {
+    return new ceres::AutoDiffCostFunction<GgxSampleCost, 3, 3, 3, 1>(
+        new GgxSampleCost(v, l, e, radiance));
+  }
+  double v_[3], l_[3], e_[3], radiance_[3];
+};
+
+ceres::Solver::Options ReferenceSolverOptions(int max_iterations) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::DENSE_QR;
+  so.minimizer_type = ceres::TRUST_REGION;
+  so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  so.max_num_iterations = max_iterations;
+  so.num_threads = 1;  // parallel over texels instead
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  return so;
+}
+
 }  // namespace
+
+GgxFitOutcome FitGgxCeres(TexelProblem& problem, const GgxStart& start,
+                          const BrdfFitOptions& options) {
+  const double t0 = std::clamp(start.t, start.t_lo, start.t_hi);
+  const LinearFit init = problem.SolveGgx(std::exp(t0));
+  double rho_d[3], f0[3], log_alpha[1] = {t0};
+  for (int c = 0; c < 3; ++c) {
+    rho_d[c] = init.channel[c].a;
+    f0[c] = std::clamp(init.channel[c].b, 0.0, 1.0);
+  }
+  ceres::Problem cp;
+  for (int i = 0; i < problem.n(); ++i)
+    cp.AddResidualBlock(GgxSampleCost::Create(problem.ViewDir(i), problem.LightDir(i),
+                                              problem.Irradiance(i), problem.Radiance(i)),
+                        nullptr, rho_d, f0, log_alpha);
+  for (int c = 0; c < 3; ++c) {
+    cp.SetParameterLowerBound(rho_d, c, 0.0);
+    cp.SetParameterLowerBound(f0, c, 0.0);
+    cp.SetParameterUpperBound(f0, c, 1.0);
+  }
+  cp.SetParameterLowerBound(log_alpha, 0, start.t_lo);
+  cp.SetParameterUpperBound(log_alpha, 0, start.t_hi);
+  ceres::Solver::Summary summary;
+  ceres::Solve(ReferenceSolverOptions(options.max_iterations), &cp, &summary);
+
+  GgxFitOutcome out;
+  out.iterations = static_cast<int>(summary.iterations.size());
+  out.converged = summary.termination_type == ceres::CONVERGENCE;
+  out.failed = !summary.IsSolutionUsable();
+  out.t = std::clamp(log_alpha[0], start.t_lo, start.t_hi);
+  problem.SolveGgx(std::exp(out.t));  // sets u, o for the error kernel
+  for (int c = 0; c < 3; ++c)
+    out.linear.channel[c] = {std::max(0.0, rho_d[c]), std::clamp(f0[c], 0.0, 1.0), false};
+  out.sse = problem.GgxSse(out.linear);
+  return out;
+}
 
 LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bounds,
                             const BrdfFitOptions& options) {
@@ -113,16 +190,8 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape shape, const Bounds& bo
   cp.SetParameterLowerBound(lobe, 2, bounds.t_lo);
   cp.SetParameterUpperBound(lobe, 2, bounds.t_hi);
 
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::DENSE_QR;
-  so.minimizer_type = ceres::TRUST_REGION;
-  so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
-  so.max_num_iterations = max_iterations;
-  so.num_threads = 1;  // parallel over texels instead
-  so.logging_type = ceres::SILENT;
-  so.minimizer_progress_to_stdout = false;
   ceres::Solver::Summary summary;
-  ceres::Solve(so, &cp, &summary);
+  ceres::Solve(ReferenceSolverOptions(max_iterations), &cp, &summary);
 
   LobeFitOutcome out;
   out.iterations = static_cast<int>(summary.iterations.size());

@@ -8,6 +8,15 @@
 // e_c (a_c + b_c g) with a = rho_d, b = rho_s. The objective, identical on both paths, is
 //   F = sum_{s,c} (e_c (a_c + b_c g_s) - L_c)^2 + w2 ((cx + 1)^2 + (cy + 1)^2),
 // w2 = lobe_prior_weight^2 * N * (mean L^2): the prior (see brdf_fit.h).
+// Weights: every residual is scaled by sqrt(w_{s,c}), w = sigma_sensor^2 / sigma_{s,c}^2 from
+// the noise model (brdf_fit.h, NOISE MODEL); the scaling is folded into e and L themselves
+// (e <- sqrt(w) e, L <- sqrt(w) L), so every kernel and both solvers see a plain least-squares
+// problem. w = 1 exactly without a quantisation term (float photos), which leaves that case bit
+// for bit as it was.
+// GGX (ggx.h): for a fixed alpha the specular factor is q_s (F0 (1 - m_s^5) + m_s^5) with
+// q = D G1 G1 / (4 n.v n.l) and m = 1 - v.h, so the model e_c (a_c + F0_c u_s + o_s) with
+// u = q (1 - m^5), o = q m^5 is linear in (a_c, F0_c) with a known offset: the same closed-form
+// channel solve (bounds a >= 0, 0 <= F0 <= 1) on the target L - e o.
 #pragma once
 
 #include <Eigen/Core>
@@ -18,6 +27,7 @@
 #include <vector>
 
 #include "digitize/brdf_fit.h"
+#include "digitize/ggx.h"
 #include "digitize/lafortune.h"
 
 namespace digitize::brdf_detail {
@@ -35,7 +45,7 @@ using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 // vectorises every pass over the samples, exp and log included). Capacity grows, never shrinks.
 class Workspace {
  public:
-  static constexpr int kArrays = 26;
+  static constexpr int kArrays = 48;
   float* Reserve(int n) {
     if (n > capacity_) {
       capacity_ = std::max(n, 2 * capacity_);
@@ -112,6 +122,8 @@ class TexelProblem {
   using Block = Eigen::Array<float, kBlock, 1>;
 
   TexelProblem(std::span<const BrdfSample> samples, const BrdfFitOptions& options, Workspace& ws) {
+    const double sensor2 = options.noise_sigma * options.noise_sigma;
+    const bool weighted = options.photo_code_max > 0 && sensor2 > 0.0;
     const int padded_max = static_cast<int>((samples.size() + kBlock - 1) / kBlock * kBlock);
     p_ = ws.Reserve(std::max(kBlock, padded_max));
     cap_ = ws.capacity();
@@ -137,13 +149,24 @@ class TexelProblem {
       Slot(kAx)[i] = v.x() * l.x();
       Slot(kAy)[i] = v.y() * l.y();
       Slot(kAz)[i] = v.z() * l.z();
+      for (int j = 0; j < 3; ++j) {
+        Slot(kV + j)[i] = v[j];
+        Slot(kLd + j)[i] = l[j];
+      }
       for (int c = 0; c < 3; ++c) {
-        Slot(kE + c)[i] = s.irradiance[c];
-        Slot(kL + c)[i] = s.radiance[c];
+        const float root_w =
+            weighted ? static_cast<float>(std::sqrt(
+                           sensor2 / (sensor2 + QuantisationVariance(s.radiance[c], options))))
+                     : 1.0f;
+        Slot(kW + c)[i] = root_w;
+        Slot(kE + c)[i] = root_w * s.irradiance[c];
+        Slot(kL + c)[i] = root_w * s.radiance[c];
       }
     }
     np_ = std::max(kBlock, (n_ + kBlock - 1) / kBlock * kBlock);
     for (int slot = kAx; slot < kE2; ++slot) std::fill(Slot(slot) + n_, Slot(slot) + np_, 0.0f);
+    for (int slot = kV; slot < kV + 6; ++slot) std::fill(Slot(slot) + n_, Slot(slot) + np_, 0.0f);
+    for (int c = 0; c < 3; ++c) std::fill(Slot(kW + c) + n_, Slot(kW + c) + np_, 1.0f);
     for (int c = 0; c < 3; ++c) {
       e2(c) = e(c).square();
       el(c) = e(c) * L(c);
@@ -160,6 +183,21 @@ class TexelProblem {
         options.specular_prior_weight * options.noise_sigma * options.noise_sigma / (0.1 * 0.1);
   }
 
+  // Variance of the photo encoding's rounding at linear value x (brdf_fit.h, NOISE MODEL): one
+  // code step in linear units, dx/dcode, squared over 12, plus the compression error.
+  static double QuantisationVariance(float x, const BrdfFitOptions& o) {
+    if (o.photo_code_max <= 0) return 0.0;
+    const double lin = std::clamp(static_cast<double>(x), 0.0, 1.0);
+    // d(code)/d(linear) / code_max: the sRGB OETF's slope (12.92 on its linear toe).
+    const double slope = !o.photo_codes_srgb ? 1.0
+                         : lin <= 0.0031308
+                             ? 12.92
+                             : 1.055 / 2.4 * std::pow(std::max(lin, 0.0031308), 1.0 / 2.4 - 1.0);
+    const double step = 1.0 / (slope * o.photo_code_max);
+    const double c = o.photo_compression_sigma_codes;
+    return step * step * (1.0 / 12.0 + c * c);
+  }
+
   int n() const { return n_; }
   int saturated() const { return saturated_; }
   double prior_w2() const { return prior_w2_; }
@@ -168,13 +206,93 @@ class TexelProblem {
   Vec3f Products(int i) const { return {Slot(kAx)[i], Slot(kAy)[i], Slot(kAz)[i]}; }
   Vec3f Irradiance(int i) const { return {Slot(kE)[i], Slot(kE + 1)[i], Slot(kE + 2)[i]}; }
   Vec3f Radiance(int i) const { return {Slot(kL)[i], Slot(kL + 1)[i], Slot(kL + 2)[i]}; }
+  Vec3f ViewDir(int i) const { return {Slot(kV)[i], Slot(kV + 1)[i], Slot(kV + 2)[i]}; }
+  Vec3f LightDir(int i) const { return {Slot(kLd)[i], Slot(kLd + 1)[i], Slot(kLd + 2)[i]}; }
+  Vec3f RootWeight(int i) const { return {Slot(kW)[i], Slot(kW + 1)[i], Slot(kW + 2)[i]}; }
 
-  // rho_d only, per channel a = max(0, p0 / s0); returns the squared error.
+  // rho_d only, per channel a = max(0, p0 / s0); returns the (weighted) squared error.
   double FitDiffuse(LinearFit* fit) {
     double sse = 0;
     for (int c = 0; c < 3; ++c) {
       fit->channel[c] = {sums_[c].s0 > 0.0 ? std::max(0.0, sums_[c].p0 / sums_[c].s0) : 0.0, 0.0};
       sse += (e(c) * static_cast<float>(fit->channel[c].a) - L(c)).square().sum();
+    }
+    return sse;
+  }
+
+  // The squared error in RADIANCE (weights undone) of the model e (a + b g + o) for the g (and,
+  // GGX, the offset o) of `kind`: what the fit reports as rms_error.
+  enum class Columns { kDiffuse, kLobe, kGgx };
+  double RadianceSse(const LinearFit& fit, Columns kind) {
+    double sse = 0;
+    for (int c = 0; c < 3; ++c) {
+      const float a = static_cast<float>(fit.channel[c].a),
+                  b = static_cast<float>(fit.channel[c].b);
+      if (kind == Columns::kDiffuse)
+        sse += ((e(c) * a - L(c)) / View(kW + c)).square().sum();
+      else if (kind == Columns::kLobe)
+        sse += ((e(c) * (a + b * g()) - L(c)) / View(kW + c)).square().sum();
+      else
+        sse += ((e(c) * (a + b * View(kU) + View(kO)) - L(c)) / View(kW + c)).square().sum();
+    }
+    return sse;
+  }
+
+  // GGX: the alpha-independent cosines, once per texel (clamped as GgxSpecular clamps them).
+  void PrepareGgx() {
+    auto vx = View(kV), vy = View(kV + 1), vz = View(kV + 2);
+    auto lx = View(kLd), ly = View(kLd + 1), lz = View(kLd + 2);
+    auto hx = View(kTmp);
+    // |v + l|^2 = 2 + 2 v.l for unit vectors; padded samples (all zero) get a harmless 1.
+    hx = ((vx + lx).square() + (vy + ly).square() + (vz + lz).square()).max(1e-12f).rsqrt();
+    View(kNh2) = ((vz + lz) * hx).square();
+    auto m = View(kM5);
+    m = 1.0f - (vx * (vx + lx) + vy * (vy + ly) + vz * (vz + lz)) * hx;
+    m = m.max(0.0f).min(1.0f);
+    m = m.square().square() * m;
+    View(kNv) = vz.max(kGgxMinCos);
+    View(kNl) = lz.max(kGgxMinCos);
+  }
+  // GGX for roughness alpha: the F0 column u and the offset o (above), then the best (a, F0)
+  // per channel; the sums it used in *sums_out; returns the weighted squared error (from the
+  // sums: exact enough to compare alphas; GgxSse measures it directly).
+  LinearFit SolveGgx(double alpha, std::array<ChannelSums, 3>* sums_out = nullptr,
+                     double* sse_out = nullptr) {
+    const float a2 = static_cast<float>(alpha * alpha);
+    auto nv = View(kNv), nl = View(kNl);
+    auto q = View(kTmp);
+    View(kO) = (a2 - 1.0f) * View(kNh2) + 1.0f;  // D's denominator (o is written below)
+    q = (a2 / static_cast<float>(kPi)) / View(kO).square();
+    q *= (2.0f * nv / (nv + (a2 + (1.0f - a2) * nv.square()).sqrt())) *
+         (2.0f * nl / (nl + (a2 + (1.0f - a2) * nl.square()).sqrt())) / (4.0f * nv * nl);
+    View(kU) = q * (1.0f - View(kM5));
+    View(kO) = q * View(kM5);
+    // Padded samples have e = L = 0: their u, o are finite and contribute nothing.
+    LinearFit fit;
+    double sse = 0;
+    for (int c = 0; c < 3; ++c) {
+      const auto u = View(kU), o = View(kO);
+      ChannelSums m = sums_[c];
+      const auto eo = e(c) * o;
+      m.s1 = (e2(c) * u).sum();
+      m.s2 = (e2(c) * u.square()).sum();
+      m.p0 = sums_[c].p0 - (e(c) * eo).sum();
+      m.p1 = ((el(c) - e(c) * eo) * u).sum();
+      m.ll = (L(c) - eo).square().sum();
+      fit.channel[c] = SolveChannel(m, 1.0);
+      sse += m.ll + QuadraticCost(m, fit.channel[c].a, fit.channel[c].b);
+      if (sums_out) (*sums_out)[c] = m;
+    }
+    if (sse_out) *sse_out = std::max(0.0, sse);
+    return fit;
+  }
+  // Exact weighted squared error of the GGX model for the alpha set last (SolveGgx).
+  double GgxSse(const LinearFit& fit) {
+    double sse = 0;
+    for (int c = 0; c < 3; ++c) {
+      const float a = static_cast<float>(fit.channel[c].a),
+                  b = static_cast<float>(fit.channel[c].b);
+      sse += (e(c) * (a + b * View(kU) + View(kO)) - L(c)).square().sum();
     }
     return sse;
   }
@@ -288,6 +406,15 @@ class TexelProblem {
     kD,
     kBase = kD + 3,
     kTmp,
+    kW,              // sqrt of the noise weight per channel (3)
+    kV = kW + 3,     // view direction (3)
+    kLd = kV + 3,    // light direction (3)
+    kNh2 = kLd + 3,  // GGX: (n.h)^2, (1 - v.h)^5, clamped n.v and n.l, the F0 column, the offset
+    kM5,
+    kNv,
+    kNl,
+    kU,
+    kO,
     kSlots
   };
   static_assert(kSlots <= Workspace::kArrays);

@@ -40,4 +40,28 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape init, const Bounds& bou
 // The solver of `method`.
 LobeSolver LobeSolverFor(BrdfFitMethod method);
 
+// GGX (brdf_fit_problem.h): only t = log alpha is nonlinear. `start` comes from the front end's
+// grid: the best grid point and its neighbours (the bracket), inside [t_lo, t_hi], the bounds.
+struct GgxStart {
+  double t = 0, bracket_lo = 0, bracket_hi = 0, t_lo = 0, t_hi = 0;
+};
+struct GgxFitOutcome {
+  double t = 0;      // log alpha, inside the bounds
+  LinearFit linear;  // (rho_d, F0) per channel for it
+  double sse = 0;    // weighted squared error, TexelProblem::GgxSse (every solver alike)
+  int iterations = 0;
+  bool converged = false;
+  bool failed = false;
+};
+using GgxSolver = GgxFitOutcome (*)(TexelProblem& problem, const GgxStart& start,
+                                    const BrdfFitOptions& options);
+// Brent's 1-D minimisation of the variable-projection cost over log alpha in the bracket
+// (brdf_fit_varpro.cpp).
+GgxFitOutcome FitGgxVarPro(TexelProblem& problem, const GgxStart& start,
+                           const BrdfFitOptions& options);
+// ceres::Solve on all 7 unknowns from the grid's start (brdf_fit_ceres.cpp).
+GgxFitOutcome FitGgxCeres(TexelProblem& problem, const GgxStart& start,
+                          const BrdfFitOptions& options);
+GgxSolver GgxSolverFor(BrdfFitMethod method);
+
 }  // namespace digitize::brdf_detail

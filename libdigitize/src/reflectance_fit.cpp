@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -144,6 +145,9 @@ Status ReflectanceFitOptions::Validate() const {
         dark_outlier_fit_ratio < 1))
     return Error{"dark_outlier_fit_ratio must be in [0, 1), got " +
                  FormatNumber(dark_outlier_fit_ratio)};
+  if (!(std::isfinite(jpeg_sigma_codes) && jpeg_sigma_codes >= 0))
+    return Error{"jpeg_sigma_codes must be finite and >= 0 (codes), got " +
+                 FormatNumber(jpeg_sigma_codes)};
   if (dark_outlier_rounds < 0 || dark_outlier_rounds > 10)
     return Error{"dark_outlier_rounds must be in [0, 10], got " +
                  std::to_string(dark_outlier_rounds)};
@@ -158,6 +162,57 @@ std::string ReflectanceFitReport::Brief() const {
   s.seconds = seconds_total;
   return Format("%.3g M texels%s: ", mtexels, photos.c_str()) + s.BriefReport() +
          Format(" (samples %.2f s, fit %.2f s)", seconds_samples, seconds_fit);
+}
+
+namespace {
+
+// Whether every probed channel of `photo` decodes from a code of 0..code_max.
+bool OnCodes(const Photo& photo, int code_max) {
+  const bool srgb = photo.encoding == ColourEncoding::kSrgb;
+  const size_t n = photo.rgb.size();
+  const size_t stride = std::max<size_t>(1, n / 2048);
+  for (size_t i = 0; i < n; i += stride) {
+    for (int c = 0; c < 3; ++c) {
+      const double v = std::clamp(static_cast<double>(photo.rgb.data[i][c]), 0.0, 1.0);
+      const double encoded = !srgb            ? v
+                             : v <= 0.0031308 ? 12.92 * v
+                                              : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+      const float code = static_cast<float>(std::round(encoded * code_max) / code_max);
+      const float decoded = srgb ? SrgbToLinear(code) : code;
+      if (std::abs(decoded - photo.rgb.data[i][c]) > 1e-6f + 1e-5f * std::abs(decoded))
+        return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+PhotoQuantisation DetectPhotoQuantisation(const PhotoSet& photos) {
+  PhotoQuantisation q;
+  bool any16 = false, any8 = false, srgb8 = true, srgb16 = true;
+  for (const Photo& p : photos.photos) {
+    if (!p.loaded()) continue;
+    std::string ext = p.path.extension().string();
+    for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if (ext == ".jpg" || ext == ".jpeg") q.lossy = true;
+    const bool srgb = p.encoding == ColourEncoding::kSrgb;
+    if (OnCodes(p, 255)) {
+      any8 = true;
+      srgb8 = srgb8 && srgb;
+    } else if (OnCodes(p, 65535)) {
+      any16 = true;
+      srgb16 = srgb16 && srgb;
+    }
+  }
+  if (any8) {
+    q.code_max = 255;
+    q.srgb = srgb8;
+  } else if (any16) {
+    q.code_max = 65535;
+    q.srgb = srgb16;
+  }
+  return q;
 }
 
 Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
@@ -203,6 +258,18 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
       texels.push_back(static_cast<uint32_t>(i));
   }
 
+  BrdfFitOptions fit_options = options.fit;
+  if (options.quantisation_from_photos) {
+    report.quantisation = DetectPhotoQuantisation(photos);
+    fit_options.photo_code_max = report.quantisation.code_max;
+    fit_options.photo_codes_srgb = report.quantisation.srgb;
+    fit_options.photo_compression_sigma_codes =
+        report.quantisation.lossy ? options.jpeg_sigma_codes : 0.0;
+  } else {
+    report.quantisation = {options.fit.photo_code_max, options.fit.photo_codes_srgb,
+                           options.fit.photo_compression_sigma_codes > 0};
+  }
+
   ReflectanceMaps& maps = result.maps;
   maps = ReflectanceMaps::Zeros(canvas.width(), canvas.height());
   BrdfFitSummary& summary = report.fit;
@@ -224,7 +291,6 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
     t0 = Clock::now();
     std::vector<size_t> removed(part.size(), 0);
     if (options.dark_outlier_ratio > 0) PrefilterDarkOutliers(samples, options, removed);
-    BrdfFitOptions fit_options = options.fit;
     auto fitted = FitBrdf(samples, fit_options);
     if (!fitted.ok()) return fitted.error();  // options were validated: not expected
     BrdfFitResult& fit = *fitted;
@@ -242,6 +308,8 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
                               in = current;
                               const TexelFit refit = FitBrdfTexel(in, fit_options);
                               fit.params[t] = refit.params;
+                              fit.model[t] = refit.model;
+                              fit.ggx[t] = refit.ggx;
                               fit.status[t] = refit.status;
                               fit.rms_error[t] = refit.rms_error;
                             }
@@ -253,8 +321,15 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
     for (size_t t = 0; t < part.size(); ++t) {
       const int x = static_cast<int>(part[t] % static_cast<uint32_t>(canvas.width()));
       const int y = static_cast<int>(part[t] / static_cast<uint32_t>(canvas.width()));
-      maps.Set(x, y, fit.params[t]);
+      if (fit.model[t] == ReflectanceModel::kGgx)
+        maps.SetGgx(x, y, fit.ggx[t]);
+      else
+        maps.Set(x, y, fit.params[t]);
       maps.status(x, y) = fit.status[t];
+      const TexelFitStatus st = fit.status[t];
+      if (st != TexelFitStatus::kDiffuseOnly && st != TexelFitStatus::kTooFewSamples &&
+          st != TexelFitStatus::kFailed)
+        ++summary.lobes_by_model[static_cast<size_t>(fit.model[t])];
       maps.fit_error(x, y) = fit.rms_error[t];
       ++summary.count_by_status[static_cast<size_t>(fit.status[t])];
       rms_sum += fit.rms_error[t];
@@ -294,6 +369,13 @@ nlohmann::json ToJson(const ReflectanceFitOptions& options) {
           {"k_max", f.k_max},
           {"max_specular_albedo", f.max_specular_albedo},
           {"diffuse_chi2_sigmas", f.diffuse_chi2_sigmas},
+          {"fit_lafortune", f.fit_lafortune},
+          {"fit_ggx", f.fit_ggx},
+          {"ggx_alpha_min", f.ggx_alpha_min},
+          {"ggx_alpha_max", f.ggx_alpha_max},
+          {"model_penalty_per_parameter", f.model_penalty_per_parameter},
+          {"quantisation_from_photos", options.quantisation_from_photos},
+          {"jpeg_sigma_codes", options.jpeg_sigma_codes},
           {"min_cos", options.samples.min_cos},
           {"shadow_rays", options.samples.shadow_rays},
           {"visibility_rays", options.samples.visibility_rays},
@@ -325,7 +407,10 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
                  "f_r = rho_d + rho_s * max(0, cx vx lx + cy vy ly + cz vz lz)^k, per RGB channel"},
                 {"gauge", "cz = 1, |cx| <= 1, |cy| <= 1"},
                 {"frame", "texel tangent frame: z = normal, x = canvas X made perpendicular to it"},
-                {"units", "rho_d, rho_s in 1/sr; radiance = f_r * (n.l) * E"}}},
+                {"units", "rho_d, rho_s in 1/sr; radiance = f_r * (n.l) * E"},
+                {"per_texel",
+                 "model.png: 0 = lafortune-1-lobe (above), 100 = ggx: f_r = rho_d + GGX/Schlick/"
+                 "Smith specular (ggx.h), F0 in rho_s, alpha in lobe k, lobe (0, 0, 1, alpha)"}}},
               {"brief", r.Brief()},
               {"warnings", r.Warnings()},
               {"photos",
@@ -337,6 +422,13 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
               {"texels_fitted", r.fit.texels},
               {"texels_outside", r.texels_outside},
               {"status", status},
+              {"lobes_by_model",
+               {{ToString(ReflectanceModel::kLafortune), r.fit.lobes_by_model[0]},
+                {ToString(ReflectanceModel::kGgx), r.fit.lobes_by_model[1]}}},
+              {"photo_quantisation",
+               {{"code_max", r.quantisation.code_max},
+                {"srgb", r.quantisation.srgb},
+                {"lossy", r.quantisation.lossy}}},
               {"samples",
                {{"candidates", s.candidates},
                 {"kept", s.kept},
@@ -372,9 +464,10 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
   std::filesystem::create_directories(dir, ec);
   if (ec) return Error{dir.string() + ": cannot create the output folder: " + ec.message()};
   const ReflectanceMaps& m = result.maps;
-  const ImageMetadata meta = {{"digitize:model", "lafortune-1-lobe, gauge cz = 1"},
-                              {"digitize:frame", "texel tangent frame (docs/formats.md)"},
-                              {"digitize:version", DIGITIZE_VERSION}};
+  const ImageMetadata meta = {
+      {"digitize:model", "lafortune-1-lobe (gauge cz = 1) or ggx, per texel (model.png)"},
+      {"digitize:frame", "texel tangent frame (docs/formats.md)"},
+      {"digitize:version", DIGITIZE_VERSION}};
   auto with = [&](const char* quantity) {
     ImageMetadata q = meta;
     q["digitize:quantity"] = quantity;
@@ -398,6 +491,10 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
   for (size_t i = 0; i < status.size(); ++i)
     status.data[i] = static_cast<uint8_t>(static_cast<int>(m.status.data[i]) * 40);
   if (Status s = WritePng8(dir / "fit_status.png", status); !s.ok()) return s;
+  Grid<uint8_t> model(m.width(), m.height());
+  for (size_t i = 0; i < model.size(); ++i)
+    model.data[i] = static_cast<uint8_t>(static_cast<int>(m.model.data[i]) * 100);
+  if (Status s = WritePng8(dir / "model.png", model); !s.ok()) return s;
   return WriteTextFile(dir / "report.json", ReflectanceReportJson(result, options, inputs));
 }
 
@@ -461,6 +558,21 @@ Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
       return Error{(dir / "fit_status.png").string() + ": value " + std::to_string(code) +
                    " is not a fit status"};
     m.status.data[i] = static_cast<TexelFitStatus>(code / 40);
+  }
+  // model.png: absent in outputs written before GGX texels existed (all Lafortune then).
+  if (std::filesystem::exists(dir / "model.png")) {
+    auto model = ReadImage(dir / "model.png");
+    if (!model.ok()) return model.error();
+    if (model->width != w || model->height != h || model->channels != 1)
+      return Error{(dir / "model.png").string() + ": not a 1-channel " + std::to_string(w) + "x" +
+                   std::to_string(h) + " image"};
+    for (size_t i = 0; i < m.model.size(); ++i) {
+      const int code = static_cast<int>(std::lround(model->pixels[i] * 255.0f));
+      if (code % 100 != 0 || code / 100 >= kReflectanceModelCount)
+        return Error{(dir / "model.png").string() + ": value " + std::to_string(code) +
+                     " is not a reflectance model"};
+      m.model.data[i] = static_cast<ReflectanceModel>(code / 100);
+    }
   }
   if (Status s = m.Validate(); !s.ok()) return Error{dir.string() + ": " + s.message()};
   return m;

@@ -45,6 +45,7 @@
 #include <vector>
 
 #include "digitize/core.h"
+#include "digitize/ggx.h"
 #include "digitize/lafortune.h"
 #include "digitize/photo_set.h"
 #include "digitize/reflectance_maps.h"
@@ -52,12 +53,14 @@
 
 namespace digitize::synth {
 
-// Ground-truth reflectance of one paint region: the fitted family (one-lobe Lafortune, stored
-// gauge) or, to judge the fit where the model cannot match, a measured 3-lobe Lafortune fit.
+// Ground-truth reflectance of one paint region: one-lobe Lafortune (stored gauge), GGX (ggx.h),
+// or, to judge the fit where no fitted model can match, a measured 3-lobe Lafortune fit.
 struct PaintMaterial {
   std::string name;           // "matte", "satin", ..., "bluepaint (measured)"
   bool is_measured = false;   // true: `measured` is the truth, `lafortune` unused
+  bool is_ggx = false;        // true (and not is_measured): `ggx` is the truth
   LafortuneParams lafortune;  // cz = 1
+  GgxParams ggx;
   MeasuredLafortune measured;
   Vec3f Evaluate(const Vec3f& v, const Vec3f& l) const;  // tangent frame, 1/sr
 };
@@ -71,6 +74,14 @@ struct PaintMaterial {
 // are embedded), not in the fitted family -- give the painting at least 7 regions for it to
 // appear (`digitize synth --measured` does).
 std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured);
+
+// Paints whose truth is GGX (ggx.h), in this order: varnish (alpha 0.05, dielectric F0 0.04
+// over dark umber), satin (alpha 0.15, F0 0.04 over vermilion), green earth (alpha 0.3, F0 0.04),
+// yellow ochre (alpha 0.6, F0 0.04), gold leaf (a metal: rho_d = 0, coloured F0 (1.0, 0.78,
+// 0.34), alpha 0.2), a Lambertian paint (lead white, no specular at all: a one-lobe material
+// with rho_s = 0), and a high-gloss glaze (alpha 0.02, F0 0.04 over a deep red) that only a
+// painting with 7 regions shows.
+std::vector<PaintMaterial> GgxPaintMaterials();
 
 enum class PhotoEncoding { kSrgb8, kSrgb16, kLinearExr };
 const char* ToString(PhotoEncoding e);  // "srgb8", "srgb16", "exr"
@@ -139,6 +150,17 @@ struct SyntheticPhotoSet {
   // px (0.00 %), 2.1 % of lit canvas px in shadow; 8.10 s"
   std::string Brief() const;
 };
+
+// The "GGX painting": a square 400 mm canvas (96 x 96 texels by default) in 6 regions painted with
+// GgxPaintMaterials() (varnish, satin, green, ochre, gold, Lambertian), photographed by 2
+// cameras (arc +-30 deg) under 48 point lights at ~1.2 px per texel, 8-bit sRGB, sensor noise
+// sigma 0.002, 16 held-out images.
+struct GgxPaintingCase {
+  PaintingOptions painting;
+  PhotoSimOptions photos;
+  std::vector<PaintMaterial> materials;
+};
+GgxPaintingCase MakeGgxPaintingCase(int resolution_px = 96, uint64_t seed = 1);
 
 // Invalid options throw (validate first). `materials` empty: DefaultPaintMaterials(false).
 SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& canvas_from_scan,

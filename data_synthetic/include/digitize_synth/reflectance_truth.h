@@ -6,7 +6,8 @@
 // canvas_from_scan inverse) and into the true canvas frame (truth.canvas_from_scan), then to the
 // nearest painting texel, whose material and one-lobe truth it is compared with. Texels of
 // measured (3-lobe) materials have no one-lobe truth: only their count is reported and the
-// held-out PSNR judges them.
+// held-out PSNR judges them. GGX materials are compared on the texels fitted with GGX (F0 and
+// alpha); Lafortune lobe errors are taken over the texels fitted with Lafortune; rho_d over all.
 #pragma once
 
 #include <string>
@@ -31,6 +32,10 @@ struct RegionReflectanceError {
   double log10_k_abs_median = 0;      // median |log10 k / k_true|, texels with a true lobe only
   double lobe_abs_median = 0;         // median max(|cx - true|, |cy - true|), same texels
   double diffuse_only_share = 0;      // share of texels fitted diffuse-only
+  bool is_ggx = false;                // the truth is GGX
+  double ggx_share = 0;               // share of texels fitted with GGX (a lobe)
+  double f0_abs_median = 0;           // GGX truth, GGX-fitted texels: median |mean_c F0 - true|
+  double log10_alpha_abs_median = 0;  // same texels: median |log10 alpha / alpha_true|
 };
 
 std::vector<RegionReflectanceError> MeasureReflectanceAccuracy(

@@ -48,8 +48,24 @@ struct ReflectanceFitOptions {
                                         // sample is never below it but for noise)
   double dark_outlier_sigmas = 6.0;
   int dark_outlier_rounds = 2;
+  // The noise model's quantisation term (brdf_fit.h, NOISE MODEL) taken from the photos
+  // (DetectPhotoQuantisation): fit.photo_code_max, photo_codes_srgb and
+  // photo_compression_sigma_codes are then set from them, overriding what `fit` holds.
+  bool quantisation_from_photos = true;
+  double jpeg_sigma_codes = 1.0;  // JPEG's error, std in codes (about 1 at quality 90)
   Status Validate() const;
 };
+
+// How the photos were quantised, found from the photos themselves (the reader keeps only linear
+// values): a photo is on 8-bit (16-bit) codes when every probed value (a few thousand pixels,
+// spread over the image) decodes from one; the coarsest over the set is taken (samples do not
+// say which photo they came from). JPEG files (.jpg/.jpeg) are lossy. Float photos: code_max 0.
+struct PhotoQuantisation {
+  int code_max = 0;  // 255, 65535, or 0 (float or not on codes: no quantisation term)
+  bool srgb = true;  // the codes are sRGB (else linear)
+  bool lossy = false;
+};
+PhotoQuantisation DetectPhotoQuantisation(const PhotoSet& photos);
 
 // A photo set constrains the fit only through its distinct (light, view) pairs: the fit classifies
 // a texel (diffuse-only or glossy) only from min_samples usable samples, so a set with fewer
@@ -70,13 +86,14 @@ struct ReflectanceFitReport {
   // are rejected, n.l <= 0); their entries, in set order.
   std::vector<std::string> light_below_canvas;
   SampleStats samples;
-  BrdfFitSummary fit;          // over the fitted texels; fit.seconds = wall time fitting
-  size_t dark_outliers = 0;    // samples removed as unmodelled shadows
-  size_t texels_refitted = 0;  // texels that lost samples to it
-  size_t texels_outside = 0;   // kOutside texels, not fitted
-  double seconds_tracer = 0;   // building the ray-tracing structure
-  double seconds_samples = 0;  // gathering samples, rays included (wall)
-  double seconds_fit = 0;      // fitting (wall)
+  BrdfFitSummary fit;              // over the fitted texels; fit.seconds = wall time fitting
+  PhotoQuantisation quantisation;  // what the noise model used (quantisation_from_photos)
+  size_t dark_outliers = 0;        // samples removed as unmodelled shadows
+  size_t texels_refitted = 0;      // texels that lost samples to it
+  size_t texels_outside = 0;       // kOutside texels, not fitted
+  double seconds_tracer = 0;       // building the ray-tracing structure
+  double seconds_samples = 0;      // gathering samples, rays included (wall)
+  double seconds_fit = 0;          // fitting (wall)
   double seconds_total = 0;
   // One line: "1.05 M texels x 64 photos: 97.8 % converged, 1.9 % diffuse-only, ...; samples
   // 2.1 s, fit 4.9 s, total 7.4 s".
@@ -109,8 +126,10 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
                                   const std::vector<std::string>& inputs);
 
 // Writes rho_d.exr, rho_s.exr (RGB, 1/sr), lobe.exr (channels cx, cy, cz, k), fit_error.exr,
-// fit_status.png (TexelFitStatus values x 40, readable by eye) and report.json into dir, each
-// atomically (the CLI wraps the folder in WriteDirectoryAtomically).
+// fit_status.png (TexelFitStatus values x 40, readable by eye), model.png (ReflectanceModel
+// values x 100: 0 Lafortune, 100 GGX; GGX texels hold F0 in rho_s and alpha in k, as
+// ReflectanceMaps) and report.json into dir, each atomically (the CLI wraps the folder in
+// WriteDirectoryAtomically).
 Status WriteReflectanceOutputs(const std::filesystem::path& dir, const ReflectanceFitResult& result,
                                const ReflectanceFitOptions& options,
                                const std::vector<std::string>& inputs);

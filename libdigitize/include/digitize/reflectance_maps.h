@@ -22,13 +22,7 @@
 
 namespace digitize {
 
-enum class ReflectanceModel : uint8_t {
-  kLafortune = 0,  // one-lobe Lafortune (the paper's model); every pack before models existed
-  kGgx = 1,        // GGX + Schlick Fresnel + Smith (ggx.h)
-};
-inline constexpr int kReflectanceModelCount = 2;
-const char* ToString(ReflectanceModel model);  // "lafortune", "ggx"
-
+// ReflectanceModel: brdf_fit.h (the fit chooses it per texel).
 struct ReflectanceMaps {
   Grid<Vec3f> rho_d;                // 1/sr, RGB, >= 0
   Grid<Vec3f> rho_s;                // 1/sr, RGB, >= 0
