@@ -29,7 +29,7 @@ struct Scenario {
   PhotoSet photos;               // re-rendered below, faults planted by the caller
 };
 
-Scenario MakeScenario(int lights = 6) {
+Scenario MakeScenario(int lights = 6, bool generator_photos = false) {
   Scenario s;
   synth::PaintingOptions po;
   po.resolution_px = 160;
@@ -38,8 +38,10 @@ Scenario MakeScenario(int lights = 6) {
   synth::PhotoSimOptions so;
   so.lights = lights;
   so.held_out_lights = 0;
-  so.noise_sigma = 0;
-  so.encoding = synth::PhotoEncoding::kLinearExr;
+  if (!generator_photos) {  // the photos are re-rendered by the tests
+    so.noise_sigma = 0;
+    so.encoding = synth::PhotoEncoding::kLinearExr;
+  }
   so.pixels_per_texel = 2.07;  // not a whole number: shifts are not whole pixels either
   s.sim = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
   s.photos = s.sim.fit;
@@ -168,6 +170,44 @@ TEST(PhotoResiduals, CameraOffSidewaysIsMeasuredAndNamed) {
         w.find("misregistration") != std::string::npos)
       named = true;
   EXPECT_TRUE(named);
+}
+
+// The generator's own photos (its renderer, 8-bit sRGB with noise, frame in view and frame
+// shadows on the canvas, saturated highlights flagged) against the true maps: nothing is off, and
+// the check must not cry wolf over what the fit does not model.
+TEST(PhotoResiduals, GeneratorPhotosOfTheTruthAreClean) {
+  const Scenario s = MakeScenario(6, true);
+  const PhotoResidualReport r = Check(s);
+  ASSERT_EQ(r.photos.size(), 6u);
+  for (const PhotoResidual& p : r.photos) {
+    EXPECT_NEAR(p.gain, 1.0, kCleanGainTol) << p.entry;
+    EXPECT_LT(p.shift_px, kCleanShiftTolPx) << p.entry;
+    EXPECT_EQ(p.flags, 0) << p.entry;
+  }
+  EXPECT_TRUE(r.Warnings().empty());
+}
+
+// Large images are averaged down for the correlation: the shift is scaled back to photo pixels.
+TEST(PhotoResiduals, SubsampledCorrelationKeepsTheShift) {
+  Scenario s = MakeScenario(2);
+  RenderAll(s);
+  Camera moved = s.photos.photos[1].camera;
+  moved.camera_from_scan.translation.y() += 3.0 * s.painting.truth.pitch_mm;
+  const Vec3d centre(s.painting.width_mm / 2, s.painting.height_mm / 2, 0);
+  const Eigen::Vector2d want = moved.Project(centre) - s.photos.photos[1].camera.Project(centre);
+  Render(s, 1, moved, s.photos.photos[1].light, 11);
+  PhotoResidualOptions options;
+  options.max_correlation_side_px = 100;  // the canvas spans ~330 x 250 px: factor 4
+  auto r = CheckPhotoResiduals(s.painting.truth, s.painting.normals, s.sim.truth, {}, s.photos,
+                               options);
+  ASSERT_TRUE(r.ok());
+  const PhotoResidual& off = r->photos[1];
+  std::printf("  planted (%.3f, %.3f) px, measured (%.3f, %.3f) px at 1/4 resolution\n", want.x(),
+              want.y(), off.shift_x_px, off.shift_y_px);
+  // A quarter-resolution correlation's 0.1 px is 0.4 photo px.
+  EXPECT_NEAR(off.shift_x_px, want.x(), 0.4);
+  EXPECT_NEAR(off.shift_y_px, want.y(), 0.4);
+  EXPECT_LT(r->photos[0].shift_px, 0.4);
 }
 
 TEST(PhotoResiduals, BlackPhotoGivesFiniteOutputAndIsNamed) {
