@@ -52,8 +52,8 @@ Scenario MakeScenario(int lights = 6, bool generator_photos = false) {
 // declared ones), adds Gaussian noise, and clears its flags.
 void Render(Scenario& s, size_t i, const Camera& camera, const Light& light, uint64_t seed) {
   const HeightFieldTracer tracer = HeightFieldTracer::Build(s.painting.truth).value();
-  const RelitImage img = RenderRelit(tracer, s.painting.truth, s.painting.normals, s.sim.truth, {},
-                                     camera, light);
+  const RelitImage img =
+      RenderRelit(tracer, s.painting.truth, s.painting.normals, s.sim.truth, {}, camera, light);
   Photo& photo = s.photos.photos[i];
   photo.rgb = img.rgb;
   photo.flags = {};
@@ -74,10 +74,11 @@ PhotoResidualReport Check(const Scenario& s) {
   EXPECT_TRUE(report.ok()) << report.error().message;
   const PhotoResidualReport r = std::move(report).value();
   for (const PhotoResidual& p : r.photos)
-    std::printf("  %s: gain %.4f (%zu px), shift (%.3f, %.3f) px = %.3f texels, response %.3f, "
-                "rms %.5f -> %.5f, flags %d\n",
-                p.entry.c_str(), p.gain, p.gain_pixels, p.shift_x_px, p.shift_y_px, p.shift_texels,
-                p.shift_response, p.rms, p.rms_after_gain, p.flags);
+    std::printf(
+        "  %s: gain %.4f (%zu px), shift (%.3f, %.3f) px = %.3f texels, response %.3f, "
+        "rms %.5f -> %.5f, flags %d\n",
+        p.entry.c_str(), p.gain, p.gain_pixels, p.shift_x_px, p.shift_y_px, p.shift_texels,
+        p.shift_response, p.rms, p.rms_after_gain, p.flags);
   std::printf("  %s\n", r.Brief().c_str());
   for (const std::string& w : r.Warnings()) std::printf("  warning: %s\n", w.c_str());
   return r;
@@ -198,8 +199,8 @@ TEST(PhotoResiduals, SubsampledCorrelationKeepsTheShift) {
   Render(s, 1, moved, s.photos.photos[1].light, 11);
   PhotoResidualOptions options;
   options.max_correlation_side_px = 100;  // the canvas spans ~330 x 250 px: factor 4
-  auto r = CheckPhotoResiduals(s.painting.truth, s.painting.normals, s.sim.truth, {}, s.photos,
-                               options);
+  auto r =
+      CheckPhotoResiduals(s.painting.truth, s.painting.normals, s.sim.truth, {}, s.photos, options);
   ASSERT_TRUE(r.ok());
   const PhotoResidual& off = r->photos[1];
   std::printf("  planted (%.3f, %.3f) px, measured (%.3f, %.3f) px at 1/4 resolution\n", want.x(),
@@ -248,8 +249,8 @@ TEST(PhotoResiduals, Errors) {
   RenderAll(s);
   PhotoResidualOptions bad;
   bad.max_shift_px = 0;
-  auto r = CheckPhotoResiduals(s.painting.truth, s.painting.normals, s.sim.truth, {}, s.photos,
-                               bad);
+  auto r =
+      CheckPhotoResiduals(s.painting.truth, s.painting.normals, s.sim.truth, {}, s.photos, bad);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message.find("max_shift_px must be > 0"), std::string::npos);
   s.photos.photos[1].rgb = {};

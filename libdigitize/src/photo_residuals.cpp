@@ -222,8 +222,7 @@ Result<PhotoResidualReport> CheckPhotoResiduals(const HeightField& canvas,
 
     if (gain.measured) {
       if (std::abs(std::log(r.gain)) > options.max_abs_log_gain) r.flags |= kResidualGainOff;
-      const Shift shift =
-          MeasureShift(relit.rgb, photo.rgb, use, options.max_correlation_side_px);
+      const Shift shift = MeasureShift(relit.rgb, photo.rgb, use, options.max_correlation_side_px);
       if (shift.measured) {
         r.shift_x_px = shift.x;
         r.shift_y_px = shift.y;

@@ -78,11 +78,11 @@ struct PhotoResidual {
   double shift_mm = 0;                    // on the canvas (0 when the scale is unknown)
   double shift_texels = 0;                // shift_mm / canvas pitch
   double shift_response = 0;              // phase-correlation peak, 0..1
-  double rms = 0;             // linear, all channels, over the compared pixels
-  double rms_after_gain = 0;  // with the relit image multiplied by gain
-  size_t pixels = 0;          // compared (canvas, unflagged)
-  size_t gain_pixels = 0;     // well-exposed ones the gain was measured on
-  uint8_t flags = 0;          // PhotoResidualFlag bits
+  double rms = 0;                         // linear, all channels, over the compared pixels
+  double rms_after_gain = 0;              // with the relit image multiplied by gain
+  size_t pixels = 0;                      // compared (canvas, unflagged)
+  size_t gain_pixels = 0;                 // well-exposed ones the gain was measured on
+  uint8_t flags = 0;                      // PhotoResidualFlag bits
 };
 
 struct PhotoResidualReport {
