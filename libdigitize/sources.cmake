@@ -62,12 +62,14 @@ set(DIGITIZE_BRDF_SOURCES
   brdf_fit_ceres.cpp   # Ceres: the ceres::Solve reference (the one file that includes Ceres)
 )
 
-set(DIGITIZE_SAMPLES_HEADERS height_field_tracer.h relight.h reflectance_samples.h reflectance_fit.h)
+set(DIGITIZE_SAMPLES_HEADERS height_field_tracer.h relight.h reflectance_samples.h reflectance_fit.h
+  photo_residuals.h)
 set(DIGITIZE_SAMPLES_SOURCES
   height_field_tracer.cpp  # Embree
   relight.cpp
   reflectance_samples.cpp
   reflectance_fit.cpp
+  photo_residuals.cpp  # OpenCV (phase correlation): per-photo gain and misregistration
 )
 
 set(DIGITIZE_PACK_HEADERS pack.h provenance.h)
