@@ -163,6 +163,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   if (Status s = options.photo.Validate(); !s.ok()) return Error{s.message()};
   if (Status s = options.fit.Validate(); !s.ok()) return Error{s.message()};
   if (Status s = options.rti.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = options.photo_check.Validate(); !s.ok()) return Error{s.message()};
   if (!options.canvas.empty())
     if (Status s = CheckCanvasFolder(options.canvas); !s.ok()) return Error{s.message()};
 
@@ -202,6 +203,12 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   Result<ReflectanceFitResult> fit = FitReflectance(
       canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
   if (!fit.ok()) return fit.error();
+  if (options.check_photos) {
+    auto check = CheckPhotoResiduals(canvas->field, canvas->normals, fit->maps,
+                                     canvas->canvas_from_scan, photos, options.photo_check);
+    if (!check.ok()) return check.error();
+    result.photo_check = std::move(check).value();
+  }
   std::vector<Grid<Vec3f>> relit;
   if (held) {
     auto score = EvaluateHeldOut(canvas->field, canvas->normals, fit->maps,
@@ -225,7 +232,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
 
 Status PipelineOptions::Validate() const {
   for (const Status& s : {pack.Validate(), photo.Validate(), rti.Validate(), fit.Validate(),
-                          preprocess.Validate()})
+                          photo_check.Validate(), preprocess.Validate()})
     if (!s.ok()) return s;
   return Status::Ok();
 }
@@ -334,6 +341,12 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
       canvas.field, canvas.normals, canvas.canvas_from_scan, photos, fit_options, progress);
   if (!fit.ok()) return fit.error();
   result.fit = fit->report;
+  if (options.check_photos) {
+    auto check = CheckPhotoResiduals(canvas.field, canvas.normals, fit->maps,
+                                     canvas.canvas_from_scan, photos, options.photo_check);
+    if (!check.ok()) return check.error();
+    result.photo_check = std::move(check).value();
+  }
 
   // 4. Pack, with provenance.
   auto provenance = RunProvenance(options, photos, fit_options, fit->report, result.rti);
