@@ -13,3 +13,10 @@ gnuplot bench/plot_fit.gp && echo "wrote docs/bench_fit.png"
 gnuplot bench/plot_pack.gp && echo "wrote docs/bench_pack.png"
 ./build/bin/viewer_bench --csv-dir=docs | tee docs/bench_viewer.txt
 gnuplot bench/plot_viewer.gp && echo "wrote docs/bench_viewer.png"
+# The real RTI capture: PTM / HSH2 / HSH3 and digitize's fit, held-out 8-bit sRGB PSNR and time.
+if [ -d ../shared/data/rti_icon ]; then
+  ./build/bin/rti_bench --data=../shared/data/rti_icon --csv-dir=docs
+else
+  echo "rti_bench skipped: ../shared/data/rti_icon is not here"
+fi
+./build/bin/photometric_stereo_bench | tee docs/bench_photometric_stereo.txt
