@@ -136,7 +136,8 @@ double RelightingRmse(const Brdf& truth, const LafortuneParams& fit, const Rig& 
 // The same for a fit under the model it chose (Lafortune or GGX).
 double RelightingRmse(const Brdf& truth, const TexelFit& fit, const Rig& rig, std::mt19937& rng,
                       int count = 400) {
-  if (fit.model != ReflectanceModel::kGgx) return RelightingRmse(truth, fit.params, rig, rng, count);
+  if (fit.model != ReflectanceModel::kGgx)
+    return RelightingRmse(truth, fit.params, rig, rng, count);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   const float z_min = std::sin(rig.min_elevation_deg * kPi / 180.0f);
   const auto random_dir = [&] {
@@ -506,10 +507,9 @@ TEST(BrdfFit, MeasuredPaintIsApproximated) {
     const double relight_diffuse = RelightingRmse(truth, diffuse.params, rig, held2);
     // Signal scale: RMS of f (n.l) over the same held-out directions.
     const double signal = RelightingRmse(truth, LafortuneParams{}, rig, held3);
-    std::printf(
-        "%s: %s fit %s: relighting RMSE %.5f (diffuse-only %.5f, signal RMS %.5f)\n",
-        m.name.c_str(), ToString(fit.model), ToString(fit.status), relight, relight_diffuse,
-        signal);
+    std::printf("%s: %s fit %s: relighting RMSE %.5f (diffuse-only %.5f, signal RMS %.5f)\n",
+                m.name.c_str(), ToString(fit.model), ToString(fit.status), relight, relight_diffuse,
+                signal);
     EXPECT_LE(relight, relight_diffuse * 1.001);
     EXPECT_LT(relight, 0.6 * signal);  // primer's per-channel lobes are the worst case (~0.55)
   }

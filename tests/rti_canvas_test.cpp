@@ -51,7 +51,8 @@ PhotoSet LambertianCapture(const std::vector<double>& intensity) {
     const Vec3f albedo(0.5f, 0.3f, 0.2f);
     for (int y = 0; y < kH; ++y)
       for (int x = 0; x < kW; ++x) {
-        const float shade = std::max(0.0f, BumpNormal(x, y).dot(photo.light.direction.cast<float>()));
+        const float shade =
+            std::max(0.0f, BumpNormal(x, y).dot(photo.light.direction.cast<float>()));
         photo.rgb(x, y) = albedo * shade * static_cast<float>(intensity[i]);
       }
     set.photos.push_back(std::move(photo));
@@ -77,8 +78,8 @@ TEST(RtiCanvasTest, RecoversIntensitiesNormalsAndRelief) {
   std::vector<double> errors;
   for (int y = 2; y < kH - 2; ++y)
     for (int x = 2; x < kW - 2; ++x)
-      errors.push_back(AngleDeg(canvas->canvas.normals(x, y).cast<double>(),
-                                BumpNormal(x, y).cast<double>()));
+      errors.push_back(
+          AngleDeg(canvas->canvas.normals(x, y).cast<double>(), BumpNormal(x, y).cast<double>()));
   std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
   EXPECT_LT(errors[errors.size() / 2], 1.0);  // the bound for noise-free normals
   // The integrated bump spans ~2 A = 4 mm peak to peak; the relief step finds it.

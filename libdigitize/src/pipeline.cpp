@@ -151,9 +151,8 @@ FolderOutput RelitFolder(const char* command, std::vector<fs::path> inputs) {
 Status WriteRelitFolder(const std::string& dir, const FolderOutput& output, const PhotoSet& held,
                         const std::vector<Grid<Vec3f>>& relit) {
   if (dir.empty()) return Status::Ok();
-  return WriteDirectoryAtomically(dir, output, [&](const fs::path& tmp) {
-    return WriteRelitImages(tmp, held, relit);
-  });
+  return WriteDirectoryAtomically(
+      dir, output, [&](const fs::path& tmp) { return WriteRelitImages(tmp, held, relit); });
 }
 
 // The fit, and the photo check after it. For an RTI capture (rti set) the photos' intensities are

@@ -661,8 +661,8 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
     for (Vec3f& c : b.data) c = c.cwiseMax(0.0f).cwiseMin(top);
     const ImageComparison cmp = CompareImages(a, b, mask, peak);
     const double image_sse_srgb8 = SquaredErrorSrgb8(a, b, mask, peak);
-    score.images.push_back({photo.entry, cmp.psnr_db, cmp.rmse,
-                            Psnr(image_sse_srgb8, cmp.pixels, 255.0), cmp.pixels});
+    score.images.push_back(
+        {photo.entry, cmp.psnr_db, cmp.rmse, Psnr(image_sse_srgb8, cmp.pixels, 255.0), cmp.pixels});
     sse += cmp.rmse * cmp.rmse * 3.0 * static_cast<double>(cmp.pixels);
     sse_srgb8 += image_sse_srgb8;
     score.pixels += cmp.pixels;

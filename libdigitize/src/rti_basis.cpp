@@ -109,7 +109,6 @@ Status RtiFitOptions::Validate() const {
   return Status::Ok();
 }
 
-
 uint8_t ToSrgb8(float value, ColourEncoding encoding) {
   double v = std::isfinite(value) ? std::clamp(static_cast<double>(value), 0.0, 1.0) : 0.0;
   if (encoding != ColourEncoding::kSrgb) v = LinearToSrgbD(v);

@@ -92,7 +92,8 @@ Result<RtiCanvas> RtiCanvasFor(PhotoSet& rti, const RtiCanvasOptions& options,
   if (!solved.ok()) return Error{rti.source.string() + ": normals: " + solved.error().message};
   out.stereo_brief = solved->Brief();
   out.intensities = solved->intensities;
-  for (size_t i = 0; i < rti.photos.size(); ++i) ScaleLight(rti.photos[i].light, out.intensities[i]);
+  for (size_t i = 0; i < rti.photos.size(); ++i)
+    ScaleLight(rti.photos[i].light, out.intensities[i]);
   out.canvas.normals = solved->normals;
 
   if (options.height) {

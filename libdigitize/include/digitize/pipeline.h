@@ -72,9 +72,9 @@ Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& optio
 
 // `digitize fit`: a canvas folder (or an RTI capture alone) + photos -> a fit folder.
 struct FitFolderOptions {
-  std::string canvas;    // a canvas folder; empty: an RTI capture's flat canvas
-  std::string photos;    // calibration JSON or RTI .lp
-  std::string held_out;  // optional: photos not fitted, relit from the fit
+  std::string canvas;        // a canvas folder; empty: an RTI capture's flat canvas
+  std::string photos;        // calibration JSON or RTI .lp
+  std::string held_out;      // optional: photos not fitted, relit from the fit
   std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
   RtiCanvasOptions rti;  // an RTI capture without a canvas: its normals, height, intensities
@@ -106,8 +106,8 @@ struct PipelineOptions {
   std::vector<std::string> scans;  // none: an RTI capture, packed on its flat canvas
   ScanReadOptions read;            // mask and PLY grid included
   PreprocessOptions preprocess;
-  std::string photos;    // calibration JSON or RTI .lp
-  std::string held_out;  // optional: photos not fitted, relit from the written pack
+  std::string photos;        // calibration JSON or RTI .lp
+  std::string held_out;      // optional: photos not fitted, relit from the written pack
   std::string held_out_out;  // optional (needs held_out): a folder of the relit held-out photos
   PhotoSetOptions photo;
   RtiCanvasOptions rti;  // an RTI capture without a scan: its normals, height, intensities

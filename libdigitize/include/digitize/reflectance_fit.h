@@ -165,8 +165,7 @@ Result<HeldOutScore> EvaluateHeldOut(const HeightField& canvas, const Grid<Vec3f
                                      const RigidTransform& canvas_from_scan,
                                      const PhotoSet& held_out,
                                      const std::vector<Grid<uint8_t>>& masks = {},
-                                     double peak = 1.0,
-                                     std::vector<Grid<Vec3f>>* relit = nullptr);
+                                     double peak = 1.0, std::vector<Grid<Vec3f>>* relit = nullptr);
 
 // Writes each relit held-out photo into `dir` under its photo's file-name stem, in the photo's
 // encoding: 8-bit sRGB PNG for sRGB photos, linear float EXR for linear ones. Errors: sizes or

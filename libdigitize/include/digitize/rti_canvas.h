@@ -31,8 +31,8 @@
 namespace digitize {
 
 struct RtiCanvasOptions {
-  bool normals = true;    // photometric stereo; false: the flat canvas, normals straight up
-  bool height = true;     // integrate the normals into a height field (needs normals)
+  bool normals = true;  // photometric stereo; false: the flat canvas, normals straight up
+  bool height = true;   // integrate the normals into a height field (needs normals)
   PhotometricStereoOptions stereo;  // estimate_intensities on by default
   NormalIntegrationOptions integration;
   ReliefOptions relief;
