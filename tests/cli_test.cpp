@@ -964,7 +964,8 @@ TEST_F(CliTest, RunRtiHeldOutOutAndFlatCanvas) {
   Output run = RunCli(common + " --held-out-out " + Path("relit") + " --out " + Path("r.pack.exr"));
   ASSERT_EQ(run.exit_code, 0) << run.text;
   std::vector<std::string> want, got;
-  for (const std::string& l : held) want.push_back(fs::path(l.substr(0, l.find(' '))).stem().string());
+  for (const std::string& l : held)
+    want.push_back(fs::path(l.substr(0, l.find(' '))).stem().string());
   for (const auto& entry : fs::directory_iterator(Path("relit"))) {
     if (entry.path().filename().string().front() == '.') continue;  // the output marker
     EXPECT_EQ(entry.path().extension(), ".png") << entry.path();

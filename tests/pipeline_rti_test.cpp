@@ -1,9 +1,8 @@
 // RunPipeline on an RTI capture without a scan (rti_canvas.h): a synthetic capture written as a
 // user has it (8-bit PNGs, .lp files), fitted on its photometric-stereo canvas and on the flat
 // one, judged against the capture's ground truth and on held-out lights.
-#include <gtest/gtest.h>
-
 #include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -97,28 +96,41 @@ TEST_F(PipelineRti, NormalsMatchTheTruthAndBeatTheFlatCanvasOnHeldOutLights) {
   ASSERT_EQ(pack->normals.height, capture_->normals.height);
   std::vector<double> err;
   for (size_t i = 0; i < capture_->normals.size(); ++i)
-    err.push_back(AngleDeg(pack->normals.data[i].cast<double>(),
-                           capture_->normals.data[i].cast<double>()));
+    err.push_back(
+        AngleDeg(pack->normals.data[i].cast<double>(), capture_->normals.data[i].cast<double>()));
   std::sort(err.begin(), err.end());
   const double median = err[err.size() / 2];
-  std::vector<double> flat_err;  // the flat canvas's normals, straight up: the relief's slopes
-  for (const Vec3f& n : capture_->normals.data)
-    flat_err.push_back(AngleDeg(Vec3d::UnitZ(), n.cast<double>()));
-  std::nth_element(flat_err.begin(), flat_err.begin() + flat_err.size() / 2, flat_err.end());
-  const double flat_median = flat_err[flat_err.size() / 2];
+  // Most of the canvas is nearly flat, so straight-up normals have a small median error too: the
+  // relief is where the normals matter, judged on the texels sloped by more than 3 deg.
+  std::vector<double> sloped_err, sloped_flat_err;
+  for (size_t i = 0; i < capture_->normals.size(); ++i) {
+    const double slope = AngleDeg(Vec3d::UnitZ(), capture_->normals.data[i].cast<double>());
+    if (slope <= 3.0) continue;
+    sloped_flat_err.push_back(slope);
+    sloped_err.push_back(
+        AngleDeg(pack->normals.data[i].cast<double>(), capture_->normals.data[i].cast<double>()));
+  }
+  ASSERT_GT(sloped_err.size(), capture_->normals.size() / 50);  // measured 5.7 %
+  const auto median_of = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  const double sloped_median = median_of(sloped_err);
+  const double sloped_flat_median = median_of(sloped_flat_err);
   std::printf(
-      "capture: %s\ncanvas: %s\nnormals vs truth: median %.3f deg, p90 %.3f deg (straight up: "
-      "median %.3f deg)\n",
+      "capture: %s\ncanvas: %s\nnormals vs truth: median %.3f deg, p90 %.3f deg; on the %zu texels "
+      "sloped > 3 deg: median %.3f deg (straight up: %.3f deg)\n",
       capture_->Brief().c_str(), r->rti->Brief().c_str(), median, err[err.size() * 9 / 10],
-      flat_median);
-  std::printf("held-out, normals: %s\nheld-out, flat:    %s\n", r->held_out->Brief().c_str(),
-              flat->held_out->Brief().c_str());
+      sloped_err.size(), sloped_median, sloped_flat_median);
   // Measured 0.71 deg (p90 1.36). What is left after the intensity estimate is mostly the .lp's
   // 2 deg jitter, averaged over 24 lights (~2 / sqrt(24) = 0.4 deg), plus gloss and 8-bit codes;
-  // the bound is 2x the measurement, and well below the relief's own slopes (the straight-up
-  // normals' median error, measured 4.4 deg), so a canvas that lost its normals fails it.
+  // the bound is 2x the measurement. The straight-up normals measure 0.53 deg (the median texel
+  // is nearly flat), so the median alone would not catch lost normals: on the sloped texels the
+  // normals measure 1.03 deg (bound 2.5x that) where straight up is 9.0 deg (more than 3 by
+  // construction; the normals must halve it).
   EXPECT_LE(median, 1.5);
-  EXPECT_LT(1.5, 0.5 * flat_median);
+  EXPECT_LT(sloped_median, 2.5);
+  EXPECT_LT(sloped_median, 0.5 * sloped_flat_median);
 
   // (b) The point of the normals: the flat canvas cannot tell a stroke's lit side from its
   // shadowed one. Measured +4.2 dB 8-bit sRGB (30.3 vs 26.1) and +5.3 dB linear; the margin is

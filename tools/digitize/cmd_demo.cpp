@@ -55,6 +55,7 @@ struct PackReport {
 struct RtiReport {
   std::string capture_brief, canvas_brief;
   double normals_median_deg = 0, normals_p90_deg = 0;
+  double sloped_median_deg = 0, sloped_flat_median_deg = 0, sloped_share = 0;
   double height_rms_mm = 0, relief_rms_mm = 0;
   HeldOutScore with_normals, flat;
   size_t fitted = 0, held_out = 0;
@@ -72,7 +73,8 @@ Status SplitLp(const std::filesystem::path& dir, size_t& fitted, size_t& held) {
     if (line.empty()) continue;
     (i % 4 == 3 ? held_lines : fit_lines).push_back(line);
   }
-  for (const auto& [name, lines] : {std::pair{"fit.lp", &fit_lines}, {"held_out.lp", &held_lines}}) {
+  for (const auto& [name, lines] :
+       {std::pair{"fit.lp", &fit_lines}, {"held_out.lp", &held_lines}}) {
     std::ofstream out(dir / name);
     out << lines->size() << "\n";
     for (const std::string& l : *lines) out << l << "\n";
@@ -159,13 +161,28 @@ Result<RtiReport> RunRtiDemo(const std::filesystem::path& dir, const DemoArgs& a
   for (size_t i = 0; i < capture.normals.size(); ++i)
     err.push_back(
         AngleDeg(pack->normals.data[i].cast<double>(), capture.normals.data[i].cast<double>()));
+  // Straight up (the flat canvas) is nearly right on the flat majority of texels: the texels
+  // sloped by more than 3 deg show what the normals add.
+  std::vector<double> sloped, sloped_flat;
+  for (size_t i = 0; i < capture.normals.size(); ++i) {
+    const double slope = AngleDeg(Vec3d::UnitZ(), capture.normals.data[i].cast<double>());
+    if (slope <= 3.0) continue;
+    sloped.push_back(err[i]);
+    sloped_flat.push_back(slope);
+  }
+  if (!sloped.empty()) {
+    std::sort(sloped.begin(), sloped.end());
+    std::sort(sloped_flat.begin(), sloped_flat.end());
+    report.sloped_median_deg = sloped[sloped.size() / 2];
+    report.sloped_flat_median_deg = sloped_flat[sloped_flat.size() / 2];
+    report.sloped_share = static_cast<double>(sloped.size()) / capture.normals.size();
+  }
   std::sort(err.begin(), err.end());
   report.normals_median_deg = err[err.size() / 2];
   report.normals_p90_deg = err[err.size() * 9 / 10];
   report.height_rms_mm = DetrendedRms(pack->field.height_mm, capture.height_mm);
   report.relief_rms_mm = Rms(capture.height_mm);
-  report.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
 }
 
@@ -356,9 +373,9 @@ int RunDemo(const DemoArgs& args) {
     camera.eye_mm = world_from_canvas.Apply(camera.eye_mm);
     camera.target_mm = world_from_canvas.Apply(camera.target_mm);
     camera.up = world_from_canvas.ApplyToDirection(camera.up);
-    rti_gallery = viewer::RenderGalleryScreenshots(
-        {{(out / "rti.pack.exr").string(), std::move(*rti_pack)}}, dir / "rti_gallery.png",
-        {camera});
+    rti_gallery =
+        viewer::RenderGalleryScreenshots({{(out / "rti.pack.exr").string(), std::move(*rti_pack)}},
+                                         dir / "rti_gallery.png", {camera});
     return Status::Ok();
   });
   if (!written.ok()) return Fail(cmd, written.message());
@@ -370,21 +387,27 @@ int RunDemo(const DemoArgs& args) {
                   ToString(p.summary.encoding), p.score.Brief().c_str());
   }
   if (rti) {
-    std::printf("\nRTI capture (no scan: normals, height and light intensities from the photos "
-                "themselves): %s; %zu fitted, %zu held out (every 4th)\n  canvas: %s\n",
-                rti->capture_brief.c_str(), rti->fitted, rti->held_out, rti->canvas_brief.c_str());
+    std::printf(
+        "\nRTI capture (no scan: normals, height and light intensities from the photos "
+        "themselves): %s; %zu fitted, %zu held out (every 4th)\n  canvas: %s\n",
+        rti->capture_brief.c_str(), rti->fitted, rti->held_out, rti->canvas_brief.c_str());
     std::printf("  normals median error    %.2f deg   (p90 %.2f deg), the pack's vs the truth\n",
                 rti->normals_median_deg, rti->normals_p90_deg);
-    std::printf("  height RMS error        %.4f mm    (%.1f %% of the relief RMS %.4f mm), "
-                "after removing a plane\n",
-                rti->height_rms_mm, 100 * rti->height_rms_mm / rti->relief_rms_mm,
-                rti->relief_rms_mm);
+    std::printf(
+        "    on the %.1f %% of texels sloped > 3 deg: median %.2f deg (straight up, as the "
+        "flat canvas has them: %.2f deg)\n",
+        100 * rti->sloped_share, rti->sloped_median_deg, rti->sloped_flat_median_deg);
+    std::printf(
+        "  height RMS error        %.4f mm    (%.1f %% of the relief RMS %.4f mm), "
+        "after removing a plane\n",
+        rti->height_rms_mm, 100 * rti->height_rms_mm / rti->relief_rms_mm, rti->relief_rms_mm);
     std::printf("  held-out PSNR, normals  %.2f dB linear, %.2f dB 8-bit sRGB\n",
                 rti->with_normals.psnr_db, rti->with_normals.psnr_srgb8_db);
-    std::printf("  held-out PSNR, flat     %.2f dB linear, %.2f dB 8-bit sRGB (normals straight "
-                "up): the normals gain %+.2f dB 8-bit sRGB\n",
-                rti->flat.psnr_db, rti->flat.psnr_srgb8_db,
-                rti->with_normals.psnr_srgb8_db - rti->flat.psnr_srgb8_db);
+    std::printf(
+        "  held-out PSNR, flat     %.2f dB linear, %.2f dB 8-bit sRGB (normals straight "
+        "up): the normals gain %+.2f dB 8-bit sRGB\n",
+        rti->flat.psnr_db, rti->flat.psnr_srgb8_db,
+        rti->with_normals.psnr_srgb8_db - rti->flat.psnr_srgb8_db);
     std::printf("  (%.1f s for the capture and both runs)\n", rti->seconds);
   }
   std::printf(
