@@ -133,6 +133,26 @@ double RelightingRmse(const Brdf& truth, const LafortuneParams& fit, const Rig& 
   return std::sqrt(sum / (3.0 * count));
 }
 
+// The same for a fit under the model it chose (Lafortune or GGX).
+double RelightingRmse(const Brdf& truth, const TexelFit& fit, const Rig& rig, std::mt19937& rng,
+                      int count = 400) {
+  if (fit.model != ReflectanceModel::kGgx) return RelightingRmse(truth, fit.params, rig, rng, count);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  const float z_min = std::sin(rig.min_elevation_deg * kPi / 180.0f);
+  const auto random_dir = [&] {
+    const float z = z_min + (1.0f - z_min) * u(rng), phi = 2.0f * kPi * u(rng);
+    const float r = std::sqrt(1.0f - z * z);
+    return Vec3f(r * std::cos(phi), r * std::sin(phi), z);
+  };
+  double sum = 0;
+  for (int i = 0; i < count; ++i) {
+    const Vec3f v = rig.views.size() == 1 ? rig.views[0] : random_dir();
+    const Vec3f l = random_dir();
+    sum += ((EvaluateGgx(fit.ggx, v, l) - truth(v, l)) * l.z()).squaredNorm();
+  }
+  return std::sqrt(sum / (3.0 * count));
+}
+
 LafortuneParams Params(Vec3f rho_d, Vec3f rho_s, float cx, float cy, float k) {
   LafortuneParams p;
   p.rho_d = rho_d;
@@ -482,13 +502,14 @@ TEST(BrdfFit, MeasuredPaintIsApproximated) {
     ExpectFinite(fit);
     EXPECT_NE(fit.status, TexelFitStatus::kFailed);
     std::mt19937 held(99), held2(99), held3(99);
-    const double relight = RelightingRmse(truth, fit.params, rig, held);
+    const double relight = RelightingRmse(truth, fit, rig, held);
     const double relight_diffuse = RelightingRmse(truth, diffuse.params, rig, held2);
     // Signal scale: RMS of f (n.l) over the same held-out directions.
     const double signal = RelightingRmse(truth, LafortuneParams{}, rig, held3);
     std::printf(
-        "%s: one-lobe fit %s, k %.1f: relighting RMSE %.5f (diffuse-only %.5f, signal RMS %.5f)\n",
-        m.name.c_str(), ToString(fit.status), fit.params.k, relight, relight_diffuse, signal);
+        "%s: %s fit %s: relighting RMSE %.5f (diffuse-only %.5f, signal RMS %.5f)\n",
+        m.name.c_str(), ToString(fit.model), ToString(fit.status), relight, relight_diffuse,
+        signal);
     EXPECT_LE(relight, relight_diffuse * 1.001);
     EXPECT_LT(relight, 0.6 * signal);  // primer's per-channel lobes are the worst case (~0.55)
   }

@@ -23,6 +23,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev  # the fuzz targets: clang's libFuzzer + sanitizer runtimes
   clang-format-14           # the formatting check of tools/dev.sh test
+  ccache                    # rebuilds of unchanged files (three builds: Release, ASan, fuzz)
   # viewer: GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
   libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
 )
@@ -44,7 +45,13 @@ configure() {  # configure DIR [cmake args...]: each folder always gets the same
   # given explicitly every time so a cache left by an older configuration is corrected (a few
   # seconds when nothing changed).
   local dir=$1; shift
-  cmake -S "$root" -B "$dir" -G Ninja -DDIGITIZE_BUILD_TESTS=ON "$@" > "$dir.configure.log" 2>&1 ||
+  local launcher=()
+  if command -v ccache > /dev/null; then
+    # Paths relative to the checkout, so another clone of the same sources hits the cache.
+    export CCACHE_BASEDIR="$root"
+    launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  fi
+  cmake -S "$root" -B "$dir" -G Ninja -DDIGITIZE_BUILD_TESTS=ON "${launcher[@]}" "$@" > "$dir.configure.log" 2>&1 ||
     { cat "$dir.configure.log"; return 1; }
 }
 

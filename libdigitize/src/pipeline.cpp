@@ -156,6 +156,51 @@ Status WriteRelitFolder(const std::string& dir, const FolderOutput& output, cons
   });
 }
 
+// The fit, and the photo check after it. For an RTI capture (rti set) the photos' intensities are
+// first refined against the fit (RtiCanvasOptions::refine_intensity_rounds), and then `held`
+// (optional) gets the intensities its lights' directions predict.
+struct CheckedFit {
+  ReflectanceFitResult fit;
+  std::optional<PhotoResidualReport> check;
+};
+template <typename Options>
+Result<CheckedFit> FitAndCheck(const PreprocessedCanvas& canvas, PhotoSet& photos,
+                               std::optional<RtiCanvas>& rti, std::optional<PhotoSet>& held,
+                               const ReflectanceFitOptions& fit_options, const Options& options,
+                               const ProgressCallback& progress) {
+  CheckedFit out;
+  auto fit = [&]() -> Status {
+    auto r = FitReflectance(canvas.field, canvas.normals, canvas.canvas_from_scan, photos,
+                            fit_options, progress);
+    if (!r.ok()) return r.error();
+    out.fit = std::move(r).value();
+    return Status::Ok();
+  };
+  auto check = [&]() -> Status {
+    auto r = CheckPhotoResiduals(canvas.field, canvas.normals, out.fit.maps,
+                                 canvas.canvas_from_scan, photos, options.photo_check);
+    if (!r.ok()) return r.error();
+    out.check = std::move(r).value();
+    return Status::Ok();
+  };
+  if (Status s = fit(); !s.ok()) return Error{s.message()};
+  const int rounds = rti && options.rti.normals ? options.rti.refine_intensity_rounds : 0;
+  for (int round = 0; round < rounds; ++round) {
+    if (Status s = check(); !s.ok()) return Error{s.message()};
+    std::vector<double> gains;
+    for (const PhotoResidual& p : out.check->photos)
+      gains.push_back(p.flags & kResidualTooFewPixels ? 1.0 : p.gain);
+    ScaleRtiIntensities(photos, rti->intensities, gains);
+    if (Status s = fit(); !s.ok()) return Error{s.message()};
+  }
+  if (rti && held)
+    ApplyPredictedIntensities(photos, rti->intensities, options.rti.intensity_kernel_deg, *held);
+  out.check.reset();
+  if (options.check_photos)
+    if (Status s = check(); !s.ok()) return Error{s.message()};
+  return out;
+}
+
 }  // namespace
 
 Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
@@ -163,6 +208,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
   if (Status s = options.photo.Validate(); !s.ok()) return Error{s.message()};
   if (Status s = options.fit.Validate(); !s.ok()) return Error{s.message()};
   if (Status s = options.rti.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = options.photo_check.Validate(); !s.ok()) return Error{s.message()};
   if (!options.canvas.empty())
     if (Status s = CheckCanvasFolder(options.canvas); !s.ok()) return Error{s.message()};
 
@@ -192,16 +238,16 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
     auto rti = RtiCanvasFor(result.photos, options.rti, progress);
     if (!rti.ok()) return rti.error();
     canvas = rti->canvas;
-    if (held)
-      ApplyPredictedIntensities(photos, rti->intensities, options.rti.intensity_kernel_deg, *held);
     result.rti = std::move(rti).value();
   } else {
     canvas = LoadFitCanvas(options.canvas, photos);
   }
   if (!canvas.ok()) return canvas.error();
-  Result<ReflectanceFitResult> fit = FitReflectance(
-      canvas->field, canvas->normals, canvas->canvas_from_scan, photos, fit_options, progress);
-  if (!fit.ok()) return fit.error();
+  auto checked =
+      FitAndCheck(*canvas, result.photos, result.rti, held, fit_options, options, progress);
+  if (!checked.ok()) return checked.error();
+  result.photo_check = std::move(checked->check);
+  ReflectanceFitResult* fit = &checked->fit;
   std::vector<Grid<Vec3f>> relit;
   if (held) {
     auto score = EvaluateHeldOut(canvas->field, canvas->normals, fit->maps,
@@ -225,7 +271,7 @@ Result<FitFolderResult> FitToFolder(const FitFolderOptions& options,
 
 Status PipelineOptions::Validate() const {
   for (const Status& s : {pack.Validate(), photo.Validate(), rti.Validate(), fit.Validate(),
-                          preprocess.Validate()})
+                          photo_check.Validate(), preprocess.Validate()})
     if (!s.ok()) return s;
   return Status::Ok();
 }
@@ -260,6 +306,7 @@ Result<PackProvenance> RunProvenance(const PipelineOptions& options, const Photo
     stages["rti"] = {{"normals", options.rti.normals},
                      {"height", options.rti.height},
                      {"intensity_kernel_deg", options.rti.intensity_kernel_deg},
+                     {"refine_intensity_rounds", options.rti.refine_intensity_rounds},
                      {"intensities", rti->intensities},
                      {"brief", rti->Brief()}};
   provenance.options_json = stages.dump();
@@ -321,8 +368,6 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
     auto rti = RtiCanvasFor(result.photos, options.rti, progress);
     if (!rti.ok()) return rti.error();
     canvas = rti->canvas;
-    if (held)
-      ApplyPredictedIntensities(photos, rti->intensities, options.rti.intensity_kernel_deg, *held);
     result.rti = std::move(rti).value();
   } else {
     return Error{"a scan is required with a calibration file (" + options.photos +
@@ -330,9 +375,11 @@ Result<PipelineResult> RunPipeline(const PipelineOptions& options,
   }
 
   // 3. Fit.
-  Result<ReflectanceFitResult> fit = FitReflectance(
-      canvas.field, canvas.normals, canvas.canvas_from_scan, photos, fit_options, progress);
-  if (!fit.ok()) return fit.error();
+  auto checked =
+      FitAndCheck(canvas, result.photos, result.rti, held, fit_options, options, progress);
+  if (!checked.ok()) return checked.error();
+  result.photo_check = std::move(checked->check);
+  ReflectanceFitResult* fit = &checked->fit;
   result.fit = fit->report;
 
   // 4. Pack, with provenance.

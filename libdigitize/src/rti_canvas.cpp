@@ -37,6 +37,9 @@ Status RtiCanvasOptions::Validate() const {
   if (!(std::isfinite(intensity_kernel_deg) && intensity_kernel_deg > 0))
     return Error{"intensity_kernel_deg must be > 0, got " + FormatNumber(intensity_kernel_deg)};
   if (height && !normals) return Error{"an RTI height field needs the normals (normals = true)"};
+  if (refine_intensity_rounds < 0 || refine_intensity_rounds > 10)
+    return Error{"refine_intensity_rounds must be in [0, 10], got " +
+                 std::to_string(refine_intensity_rounds)};
   return Status::Ok();
 }
 
@@ -112,6 +115,17 @@ Result<RtiCanvas> RtiCanvasFor(PhotoSet& rti, const RtiCanvasOptions& options,
   ReportProgress(progress, "height", 1.0);
   out.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return out;
+}
+
+void ScaleRtiIntensities(PhotoSet& rti, std::vector<double>& intensities,
+                         const std::vector<double>& factors) {
+  DIGITIZE_CHECK(intensities.size() == rti.photos.size() && factors.size() == rti.photos.size(),
+                 "one intensity and one factor per photo");
+  for (size_t i = 0; i < factors.size(); ++i) {
+    if (!(std::isfinite(factors[i]) && factors[i] > 0)) continue;
+    ScaleLight(rti.photos[i].light, factors[i]);
+    intensities[i] *= factors[i];
+  }
 }
 
 double PredictRtiIntensity(const PhotoSet& fitted, const std::vector<double>& intensities,

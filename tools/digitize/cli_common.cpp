@@ -62,6 +62,12 @@ void AddPhotoSetFlags(CLI::App* c, PhotoSetOptions& o) {
       ->group("Photos");
 }
 
+void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidualReport>& check) {
+  if (!check) return;
+  for (const std::string& w : check->Warnings()) Warn(command, w);
+  std::printf("photo check: %s\n", check->Brief().c_str());
+}
+
 void AddRtiCanvasFlags(CLI::App* c, RtiCanvasOptions& o) {
   c->add_flag("--rti-flat{false}", o.normals,
               "RTI captures: fit on the flat canvas with normals straight up (no photometric "

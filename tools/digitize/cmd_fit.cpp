@@ -27,8 +27,10 @@ int RunFit(FitArgs args) {
   if (!r.ok()) return Fail(cmd, r.error().message);
   const ReflectanceFitReport& report = r->fit;
   for (const std::string& w : report.Warnings()) Warn(cmd, w);
+  PrintPhotoCheck(cmd, r->photo_check);
   std::printf("photos: %s\n", r->photos.summary.Brief().c_str());
   PrintRtiPitch(cmd, r->photos);
+  if (r->rti) std::printf("rti canvas: %s\n", r->rti->Brief().c_str());
   std::printf("samples: %s\n", report.samples.Brief().c_str());
   if (report.dark_outliers > 0)
     std::printf("unmodelled shadows: %zu dark samples removed, %zu texels refitted\n",
@@ -65,6 +67,9 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
                 "Calibration JSON or .lp of photos NOT fitted: relight them from the maps and "
                 "print PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
+  c->add_flag("--no-photo-check{false}", args->fit.check_photos,
+              "Skip the check after the fit that warns of photos brighter/darker than the fit or "
+              "shifted from it (wrong light intensity, misregistered camera)");
   c->add_option("--held-out-out", args->fit.held_out_out,
                 "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
                 "photos, linear EXR for linear ones)")

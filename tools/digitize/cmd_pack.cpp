@@ -73,6 +73,11 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
                     s->quantisation.height_bits, s->quantisation.normal_bits,
                     s->quantisation.rho_bits, s->quantisation.lobe_bits);
       std::printf("  pitch       %.4g mm\n", s->pitch_mm);
+      std::printf("  models     ");
+      for (int m = 0; m < kReflectanceModelCount; ++m)
+        std::printf(" %s %lld texels%s", ToString(static_cast<ReflectanceModel>(m)),
+                    static_cast<long long>(s->texels_by_model[m]),
+                    m + 1 < kReflectanceModelCount ? "," : "\n");
       std::printf("  relief      delta0 %.4g mm, H %.4g mm, %zu boxes of %d texels\n", s->delta0_mm,
                   s->max_height_mm, s->box_count, s->cell_px);
       // Every string from the file is escaped: a pack is shared, and its provenance could

@@ -32,11 +32,13 @@ int Run(RunArgs args) {
   bar.Finish();
   if (!r.ok()) return Fail(cmd, r.error().message);
   for (const std::string& w : r->fit.Warnings()) Warn(cmd, w);
+  PrintPhotoCheck(cmd, r->photo_check);
   if (r->preprocessed)
     for (const StepReport& step : r->preprocessed->steps)
       std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf("photos: %s\n", r->photos.summary.Brief().c_str());
   PrintRtiPitch(cmd, r->photos);
+  if (r->rti) std::printf("rti canvas: %s\n", r->rti->Brief().c_str());
   std::printf("samples: %s\n", r->fit.samples.Brief().c_str());
   std::printf("fit: %s\n", r->fit.Brief().c_str());
   if (r->held_out) std::printf("from the pack: %s\n", r->held_out->Brief().c_str());
@@ -70,6 +72,9 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
        "Calibration JSON or .lp of photos NOT fitted: relight them from the written pack, print "
        "PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
+  c->add_flag("--no-photo-check{false}", args->pipeline.check_photos,
+              "Skip the check after the fit that warns of photos brighter/darker than the fit or "
+              "shifted from it (wrong light intensity, misregistered camera)");
   c->add_option("--held-out-out", args->pipeline.held_out_out,
                 "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
                 "photos, linear EXR for linear ones)")

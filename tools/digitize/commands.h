@@ -8,6 +8,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,8 @@ void PrintPackSummaryLine(const std::string& path, const PackSummary& summary);
 void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quantised);
 // Photo-set flags (--rti-pitch-mm, --allow-outside-paths) shared by fit and run.
 void AddPhotoSetFlags(CLI::App* command, PhotoSetOptions& options);
+// The photo check's warnings, and one line with its brief.
+void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidualReport>& check);
 // --rti-flat, --rti-no-height, --rti-no-intensities: how an RTI capture becomes a canvas.
 void AddRtiCanvasFlags(CLI::App* command, RtiCanvasOptions& options);
 // The scan input flags (--mask, --grid WIDTH HEIGHT) folded into the read options.

@@ -11,6 +11,7 @@
 
 #include "digitize/core.h"
 #include "digitize/pack.h"
+#include "digitize/photo_residuals.h"
 #include "digitize/photo_set.h"
 #include "digitize/preprocess.h"
 #include "digitize/reflectance_fit.h"
@@ -78,6 +79,8 @@ struct FitFolderOptions {
   PhotoSetOptions photo;
   RtiCanvasOptions rti;  // an RTI capture without a canvas: its normals, height, intensities
   ReflectanceFitOptions fit;
+  bool check_photos = true;  // after the fit: each photo's gain and shift (CheckPhotoResiduals)
+  PhotoResidualOptions photo_check;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
   std::string out;                         // the fit folder
 };
@@ -86,6 +89,7 @@ struct FitFolderResult {
   PhotoSet photos;
   std::optional<RtiCanvas> rti;  // an RTI capture fitted without a canvas
   ReflectanceFitReport fit;
+  std::optional<PhotoResidualReport> photo_check;  // with check_photos
   std::optional<HeldOutScore> held_out;
 };
 
@@ -108,6 +112,8 @@ struct PipelineOptions {
   PhotoSetOptions photo;
   RtiCanvasOptions rti;  // an RTI capture without a scan: its normals, height, intensities
   ReflectanceFitOptions fit;
+  bool check_photos = true;  // after the fit: each photo's gain and shift (CheckPhotoResiduals)
+  PhotoResidualOptions photo_check;
   bool dark_outlier_ratio_chosen = false;  // FitOptionsFor
   PackWriteOptions pack;
   std::string out;   // the pack file
@@ -121,6 +127,7 @@ struct PipelineResult {
   std::optional<RtiCanvas> rti;                  // an RTI capture without a scan
   PhotoSet photos;
   ReflectanceFitReport fit;
+  std::optional<PhotoResidualReport> photo_check;  // with check_photos
   std::optional<HeldOutScore> held_out;  // relit from the pack as written (what a user gets)
   PackSummary pack;                      // of the written file
 };

@@ -39,6 +39,10 @@ struct RtiCanvasOptions {
   // Intensity of a light the fit did not see: the intensities of the fitted lights within
   // about this angle (Gaussian kernel in degrees, geometric mean) of its direction.
   double intensity_kernel_deg = 8.0;
+  // After the first fit, each photo's intensity is corrected by its gain against the fit
+  // (CheckPhotoResiduals: the full reflectance model, where photometric stereo saw a Lambertian
+  // one) and the fit is run again, this many times. rti_icon: 25.7 -> see docs/bench_rti.txt.
+  int refine_intensity_rounds = 1;
   Status Validate() const;  // names the option
 };
 
@@ -58,6 +62,11 @@ struct RtiCanvas {
 // own errors (named).
 Result<RtiCanvas> RtiCanvasFor(PhotoSet& rti, const RtiCanvasOptions& options = {},
                                const ProgressCallback& progress = nullptr);
+
+// Multiplies photo i's light and intensities[i] by factors[i] (> 0 and finite; others are left
+// as they are). Sizes must agree (checked: throws InvariantError otherwise).
+void ScaleRtiIntensities(PhotoSet& rti, std::vector<double>& intensities,
+                         const std::vector<double>& factors);
 
 // The intensity a light towards `direction` (unit, canvas frame) has in the capture whose
 // lights are `fitted` with `intensities` (RtiCanvas::intensities; fitted lights as read, before
