@@ -178,6 +178,12 @@ TEST_F(CliTest, DemoPrintsAccuracyAndWritesOutputs) {
     Output verify = RunCli("verify " + Path(std::string("demo/") + f));
     EXPECT_EQ(verify.exit_code, 0) << verify.text;
   }
+  // The RTI part: its truth comparisons, both canvases' held-out PSNR, and its packs.
+  for (const char* s : {"RTI capture", "normals median error", "height RMS error",
+                        "held-out PSNR, normals", "held-out PSNR, flat"})
+    EXPECT_NE(out.text.find(s), std::string::npos) << s << "\n" << out.text;
+  for (const char* f : {"rti.pack.exr", "rti.flat.pack.exr", "rti/fit.lp", "rti/held_out.lp"})
+    EXPECT_TRUE(fs::exists(Path(std::string("demo/") + f))) << f;
 }
 
 // Reads `inspect --json` output.
@@ -931,6 +937,58 @@ TEST_F(CliTest, RtiPitchFromTagsOrSaidToBeAssumed) {
   ASSERT_EQ(given.exit_code, 0) << given.text;
   EXPECT_NE(given.text.find("RTI pixel pitch: 0.25 mm, given"), std::string::npos) << given.text;
   EXPECT_NEAR(InspectJson(Path("g.pack.exr")).value("pitch_mm", 0.0), 0.25, 1e-6);
+}
+
+// `run` on an RTI capture with a held-out split: the relit held-out photos land in
+// --held-out-out under the photos' stems, and the flat canvas (--rti-flat) scores differently.
+TEST_F(CliTest, RunRtiHeldOutOutAndFlatCanvas) {
+  Output synth = RunCli("synth --out " + Path("s") +
+                        " --width-mm 24 --height-mm 18 --resolution 96 --scan-size 48 48 --rti "
+                        "--rti-lights 16");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  // Every 4th line of dirs.lp held out.
+  std::ifstream in(Path("s/rti/dirs.lp"));
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> fit, held;
+  for (size_t i = 0; std::getline(in, line); ++i)
+    if (!line.empty()) (i % 4 == 3 ? held : fit).push_back(line);
+  ASSERT_EQ(held.size(), 4u);
+  for (const auto& [name, lines] : {std::pair{"s/rti/fit.lp", &fit}, {"s/rti/held.lp", &held}}) {
+    std::ofstream out(Path(name));
+    out << lines->size() << "\n";
+    for (const std::string& l : *lines) out << l << "\n";
+  }
+  const std::string common = "run --photos " + Path("s/rti/fit.lp") + " --held-out " +
+                             Path("s/rti/held.lp") + " --rti-pitch-mm 0.25";
+  Output run = RunCli(common + " --held-out-out " + Path("relit") + " --out " + Path("r.pack.exr"));
+  ASSERT_EQ(run.exit_code, 0) << run.text;
+  std::vector<std::string> want, got;
+  for (const std::string& l : held)
+    want.push_back(fs::path(l.substr(0, l.find(' '))).stem().string());
+  for (const auto& entry : fs::directory_iterator(Path("relit"))) {
+    if (entry.path().filename().string().front() == '.') continue;  // the output marker
+    EXPECT_EQ(entry.path().extension(), ".png") << entry.path();
+    got.push_back(entry.path().stem().string());
+    auto image = OIIO::ImageInput::open(entry.path().string());
+    ASSERT_TRUE(image) << entry.path();
+    EXPECT_EQ(image->spec().width, 96) << entry.path();
+    EXPECT_EQ(image->spec().height, 72) << entry.path();
+  }
+  std::sort(want.begin(), want.end());
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, want);
+
+  // The PSNR line of each run ("from the pack: held-out PSNR ..."): the flat canvas's differs.
+  const auto psnr_line = [](const std::string& text) {
+    const size_t at = text.find("from the pack: held-out PSNR");
+    return at == std::string::npos ? std::string() : text.substr(at, text.find('\n', at) - at);
+  };
+  Output flat = RunCli(common + " --rti-flat --rti-no-height --out " + Path("f.pack.exr"));
+  ASSERT_EQ(flat.exit_code, 0) << flat.text;
+  ASSERT_FALSE(psnr_line(run.text).empty()) << run.text;
+  ASSERT_FALSE(psnr_line(flat.text).empty()) << flat.text;
+  EXPECT_NE(psnr_line(run.text), psnr_line(flat.text));
 }
 
 }  // namespace
