@@ -984,7 +984,7 @@ TEST_F(CliTest, RunRtiHeldOutOutAndFlatCanvas) {
     const size_t at = text.find("from the pack: held-out PSNR");
     return at == std::string::npos ? std::string() : text.substr(at, text.find('\n', at) - at);
   };
-  Output flat = RunCli(common + " --rti-flat --rti-no-height --out " + Path("f.pack.exr"));
+  Output flat = RunCli(common + " --rti-flat --out " + Path("f.pack.exr"));
   ASSERT_EQ(flat.exit_code, 0) << flat.text;
   ASSERT_FALSE(psnr_line(run.text).empty()) << run.text;
   ASSERT_FALSE(psnr_line(flat.text).empty()) << flat.text;

@@ -94,13 +94,14 @@ TEST(RtiCanvasTest, RecoversIntensitiesNormalsAndRelief) {
 TEST(RtiCanvasTest, FlatOptionKeepsTheOldCanvasAndLights) {
   PhotoSet set = LambertianCapture(std::vector<double>(8, 1.5));
   RtiCanvasOptions options;
-  options.normals = false;
-  options.height = false;
+  options.normals = false;  // height stays on: ignored without normals (--rti-flat alone)
   auto canvas = RtiCanvasFor(set, options);
   ASSERT_TRUE(canvas.ok()) << canvas.error().message;
   for (const Vec3f& n : canvas->canvas.normals.data) EXPECT_EQ(n, Vec3f::UnitZ());
   for (const Photo& p : set.photos) EXPECT_EQ(p.light.irradiance, Vec3f::Ones());
   for (double e : canvas->intensities) EXPECT_EQ(e, 1.0);
+  for (float z : canvas->canvas.field.height_mm.data) EXPECT_EQ(z, 0.0f);
+  EXPECT_TRUE(canvas->canvas.boxes.empty());
 }
 
 TEST(RtiCanvasTest, RefusesBadInput) {
@@ -114,9 +115,6 @@ TEST(RtiCanvasTest, RefusesBadInput) {
   not_rti.is_rti = false;
   EXPECT_FALSE(RtiCanvasFor(not_rti).ok());
   RtiCanvasOptions bad;
-  bad.normals = false;  // height without normals
-  EXPECT_FALSE(RtiCanvasFor(set, bad).ok());
-  bad = {};
   bad.intensity_kernel_deg = 0;
   EXPECT_FALSE(RtiCanvasFor(set, bad).ok());
 }

@@ -36,7 +36,6 @@ Status RtiCanvasOptions::Validate() const {
   if (Status s = relief.Validate(); !s.ok()) return s;
   if (!(std::isfinite(intensity_kernel_deg) && intensity_kernel_deg > 0))
     return Error{"intensity_kernel_deg must be > 0, got " + FormatNumber(intensity_kernel_deg)};
-  if (height && !normals) return Error{"an RTI height field needs the normals (normals = true)"};
   if (refine_intensity_rounds < 0 || refine_intensity_rounds > 10)
     return Error{"refine_intensity_rounds must be in [0, 10], got " +
                  std::to_string(refine_intensity_rounds)};
