@@ -112,9 +112,9 @@ std::vector<BrdfSample> Render(const Brdf& brdf, const Rig& rig, float noise_sig
   return out;
 }
 
-// Relighting RMSE over held-out directions, radiance units (I = 1).
-double RelightingRmse(const Brdf& truth, const LafortuneParams& fit, const Rig& rig,
-                      std::mt19937& rng, int count = 400) {
+// Relighting RMSE of `fitted` against `truth` over held-out directions, radiance units (I = 1).
+double RelightingRmse(const Brdf& truth, const Brdf& fitted, const Rig& rig, std::mt19937& rng,
+                      int count = 400) {
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   const float z_min = std::sin(rig.min_elevation_deg * kPi / 180.0f);
   const auto random_dir = [&] {
@@ -127,10 +127,17 @@ double RelightingRmse(const Brdf& truth, const LafortuneParams& fit, const Rig& 
     // One camera: the lobe shape is only seen from it, so judge relighting from it.
     const Vec3f v = rig.views.size() == 1 ? rig.views[0] : random_dir();
     const Vec3f l = random_dir();
-    const Vec3f diff = (EvaluateLafortune(fit, v, l) - truth(v, l)) * l.z();
-    sum += diff.squaredNorm();
+    sum += ((fitted(v, l) - truth(v, l)) * l.z()).squaredNorm();
   }
   return std::sqrt(sum / (3.0 * count));
+}
+
+double RelightingRmse(const Brdf& truth, const LafortuneParams& fit, const Rig& rig,
+                      std::mt19937& rng, int count = 400) {
+  const Brdf fitted = [&fit](const Vec3f& v, const Vec3f& l) {
+    return EvaluateLafortune(fit, v, l);
+  };
+  return RelightingRmse(truth, fitted, rig, rng, count);
 }
 
 // The same for a fit under the model it chose (Lafortune or GGX).
@@ -138,20 +145,8 @@ double RelightingRmse(const Brdf& truth, const TexelFit& fit, const Rig& rig, st
                       int count = 400) {
   if (fit.model != ReflectanceModel::kGgx)
     return RelightingRmse(truth, fit.params, rig, rng, count);
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  const float z_min = std::sin(rig.min_elevation_deg * kPi / 180.0f);
-  const auto random_dir = [&] {
-    const float z = z_min + (1.0f - z_min) * u(rng), phi = 2.0f * kPi * u(rng);
-    const float r = std::sqrt(1.0f - z * z);
-    return Vec3f(r * std::cos(phi), r * std::sin(phi), z);
-  };
-  double sum = 0;
-  for (int i = 0; i < count; ++i) {
-    const Vec3f v = rig.views.size() == 1 ? rig.views[0] : random_dir();
-    const Vec3f l = random_dir();
-    sum += ((EvaluateGgx(fit.ggx, v, l) - truth(v, l)) * l.z()).squaredNorm();
-  }
-  return std::sqrt(sum / (3.0 * count));
+  const Brdf fitted = [&fit](const Vec3f& v, const Vec3f& l) { return EvaluateGgx(fit.ggx, v, l); };
+  return RelightingRmse(truth, fitted, rig, rng, count);
 }
 
 LafortuneParams Params(Vec3f rho_d, Vec3f rho_s, float cx, float cy, float k) {
