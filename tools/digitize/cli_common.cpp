@@ -68,6 +68,16 @@ void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidu
   std::printf("photo check: %s\n", check->Brief().c_str());
 }
 
+void AddPhotoCheckAndRelitFlags(CLI::App* c, bool& check_photos, std::string& held_out_out) {
+  c->add_flag("--no-photo-check{false}", check_photos,
+              "Skip the check after the fit that warns of photos brighter/darker than the fit or "
+              "shifted from it (wrong light intensity, misregistered camera)");
+  c->add_option("--held-out-out", held_out_out,
+                "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
+                "photos, linear EXR for linear ones)")
+      ->transform(FolderPath());
+}
+
 void AddRtiCanvasFlags(CLI::App* c, RtiCanvasOptions& o) {
   c->add_flag("--rti-flat{false}", o.normals,
               "RTI captures: fit on the flat canvas with normals straight up (no photometric "

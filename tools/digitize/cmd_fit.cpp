@@ -67,13 +67,7 @@ void AddFitCommand(CLI::App& app, int& exit_code) {
                 "Calibration JSON or .lp of photos NOT fitted: relight them from the maps and "
                 "print PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
-  c->add_flag("--no-photo-check{false}", args->fit.check_photos,
-              "Skip the check after the fit that warns of photos brighter/darker than the fit or "
-              "shifted from it (wrong light intensity, misregistered camera)");
-  c->add_option("--held-out-out", args->fit.held_out_out,
-                "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
-                "photos, linear EXR for linear ones)")
-      ->transform(FolderPath());
+  AddPhotoCheckAndRelitFlags(c, args->fit.check_photos, args->fit.held_out_out);
   c->add_option("--method", args->method,
                 "fast (variable projection) or ceres (ceres::Solve reference)")
       ->check(CLI::IsMember({"fast", "ceres"}))

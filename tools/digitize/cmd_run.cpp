@@ -72,13 +72,7 @@ void AddRunCommand(CLI::App& app, int& exit_code) {
        "Calibration JSON or .lp of photos NOT fitted: relight them from the written pack, print "
        "PSNR (linear and 8-bit sRGB)")
       ->check(CLI::ExistingFile);
-  c->add_flag("--no-photo-check{false}", args->pipeline.check_photos,
-              "Skip the check after the fit that warns of photos brighter/darker than the fit or "
-              "shifted from it (wrong light intensity, misregistered camera)");
-  c->add_option("--held-out-out", args->pipeline.held_out_out,
-                "Folder for the relit held-out photos (same file-name stems; sRGB PNG for sRGB "
-                "photos, linear EXR for linear ones)")
-      ->transform(FolderPath());
+  AddPhotoCheckAndRelitFlags(c, args->pipeline.check_photos, args->pipeline.held_out_out);
   c->add_option("--pixel-pitch-mm", args->pipeline.read.pixel_pitch_mm,
                 "Sample spacing (mm) of depth-only scans")
       ->group("Input");

@@ -40,6 +40,8 @@ void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quant
 void AddPhotoSetFlags(CLI::App* command, PhotoSetOptions& options);
 // The photo check's warnings, and one line with its brief.
 void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidualReport>& check);
+// --no-photo-check and --held-out-out, as fit and run take them.
+void AddPhotoCheckAndRelitFlags(CLI::App* command, bool& check_photos, std::string& held_out_out);
 // --rti-flat, --rti-no-height, --rti-no-intensities: how an RTI capture becomes a canvas.
 void AddRtiCanvasFlags(CLI::App* command, RtiCanvasOptions& options);
 // The scan input flags (--mask, --grid WIDTH HEIGHT) folded into the read options.
