@@ -99,11 +99,14 @@ std::vector<RegionScore> ScoreByRegion(const Case& c, int margin) {
   return out;
 }
 
-Case FitGgxPainting(bool noise, ReflectanceFitOptions options = {}) {
+// frame: the generator's default raised frame around the canvas (false: the canvas alone).
+Case FitGgxPainting(bool noise, ReflectanceFitOptions options = {}, bool frame = true) {
   const synth::GgxPaintingCase setup = synth::MakeGgxPaintingCase(96);
   Case c;
   c.painting = synth::MakePainting(setup.painting);
-  const synth::Scene scene(c.painting, synth::FrameOptions{});
+  synth::FrameOptions frame_options;
+  frame_options.enabled = frame;
+  const synth::Scene scene(c.painting, frame_options);
   synth::PhotoSimOptions so = setup.photos;
   if (!noise) {
     so.noise_sigma = 0;
@@ -175,18 +178,23 @@ ReflectanceFitOptions LafortuneOnlyOptions() {
 }
 
 // Noise-free photos of GGX paints: the GGX candidate matches them, so relighting is close to
-// exact wherever a texel's samples are of its own paint. Measured (96 x 96 texels): interior
-// texels 37.1 dB pooled, every region >= 33.2 dB; all texels 29.8 dB, the loss being at region
-// boundaries and the canvas edge, where the ~1.2 px per texel photos blend two paints or the
-// frame into a texel's samples. The one-lobe Lafortune fit alone gets 3+ dB less inside.
+// exact wherever a texel's samples are of its own paint. Measured (96 x 96 texels): texels 2 from
+// another paint and the canvas edge 43.8 dB pooled, every region >= 40.8 dB (varnish); all texels
+// 33.1 dB. Two things made the interior figure (37.1 dB before them): footprint sampling
+// (reflectance_samples.h: a texel's sample is the mean of the pixels whose nearest texel it is,
+// not a bilinear blend with its neighbours') and widening lobes whose unseen peak a misfit had
+// pushed to the energy bound (brdf_fit.cpp, ResolveLobe). Two thirds of what the all-texel figure
+// loses is on the two texels next to the frame: the canvas model holds no frame, so photo pixels
+// the 25 mm frame hides or shadows there are fitted as paint (without the frame, next test, all
+// texels reach 38.2 dB). The one-lobe Lafortune fit alone gets 20 dB less inside.
 TEST(ReflectanceFitGgx, NoiseFreeGgxPainting) {
   const Case c = FitGgxPainting(false);
   ASSERT_EQ(c.interior.size(), 7u);  // 6 regions + all
-  EXPECT_GE(c.interior.back().psnr_db, 36.0);
-  EXPECT_GE(c.regions.back().psnr_db, 28.0);
+  EXPECT_GE(c.interior.back().psnr_db, 41.0);
+  EXPECT_GE(c.regions.back().psnr_db, 31.5);
   EXPECT_GT(c.interior.back().pixels, 50000u);
   for (size_t i = 0; i + 1 < c.interior.size(); ++i) {
-    EXPECT_GE(c.interior[i].psnr_db, 32.0) << c.interior[i].name;
+    EXPECT_GE(c.interior[i].psnr_db, 38.0) << c.interior[i].name;
     EXPECT_GT(c.interior[i].pixels, 2000u) << c.interior[i].name;
   }
   // The model choice: GGX wherever the paint has a lobe.
@@ -194,25 +202,40 @@ TEST(ReflectanceFitGgx, NoiseFreeGgxPainting) {
             c.fit.report.fit.texels / 2);
 
   const Case before = FitGgxPainting(false, LafortuneOnlyOptions());
-  EXPECT_GT(c.interior.back().psnr_db, before.interior.back().psnr_db + 3.0);
+  EXPECT_GT(c.interior.back().psnr_db, before.interior.back().psnr_db + 10.0);
 }
 
-// 8-bit sRGB photos with sensor noise 0.002: the Lambertian paint relights at 45 dB inside its
-// region and keeps fewer lobes than the fit before GGX, BIC and the quantisation term (measured
-// 10.1 % of its interior texels with a lobe, 22 % of all, against 16 % and 26 % before). What
-// lobes remain are not noise: the noise-free photos give as many (26 % of all), from samples that
-// disagree with any BRDF (a shadow edge or a steep relief wall inside a texel's footprint).
+// The same painting without its frame: every texel's photo pixels are of the canvas. Measured:
+// all texels 38.2 dB pooled, every region >= 34.9 dB (varnish; satin 39.5, gold 36.1), inside
+// 45.0 dB. What remains is mostly on boundary texels: a texel whose footprint a paint boundary
+// crosses holds two paints, which no per-texel model relights exactly.
+TEST(ReflectanceFitGgx, NoiseFreeGgxPaintingWithoutFrame) {
+  const Case c = FitGgxPainting(false, {}, false);
+  ASSERT_EQ(c.regions.size(), 7u);
+  EXPECT_GE(c.regions.back().psnr_db, 37.5);
+  for (size_t i = 0; i + 1 < c.regions.size(); ++i)
+    EXPECT_GE(c.regions[i].psnr_db, 34.0) << c.regions[i].name;
+  EXPECT_GE(c.interior.back().psnr_db, 43.0);
+}
+
+// 8-bit sRGB photos with sensor noise 0.002: the Lambertian paint relights at 56 dB inside its
+// region and keeps far fewer lobes than the fit before GGX, BIC and the quantisation term
+// (measured 2.1 % of its interior texels with a lobe, 5.7 % of all, against 68 % and 70 % for
+// the one-lobe fit without the quantisation term). What lobes remain are not noise: they sit where
+// samples disagree with any BRDF (a shadow edge or a steep relief wall inside a texel's footprint,
+// the frame's edge).
 TEST(ReflectanceFitGgx, DefaultNoiseLambertianStaysDiffuse) {
   const Case c = FitGgxPainting(true);
   EXPECT_EQ(c.fit.report.quantisation.code_max, 255);
   EXPECT_TRUE(c.fit.report.quantisation.srgb);
   const RegionScore* lambert = Find(c.interior, "lambertian");
   ASSERT_NE(lambert, nullptr);
-  EXPECT_GE(lambert->psnr_db, 42.0);
+  EXPECT_GE(lambert->psnr_db, 50.0);
   const double share = LobeShare(c, "lambertian", 2), share_all = LobeShare(c, "lambertian", 0);
   std::printf("  lambertian texels with a lobe: %.2f %% inside, %.2f %% of all\n", 100.0 * share,
               100.0 * share_all);
-  EXPECT_LE(share, 0.15);
+  EXPECT_LE(share, 0.05);
+  EXPECT_LE(share_all, 0.10);
 
   const Case d = FitGgxPainting(true, LafortuneOnlyOptions());
   const double share_before = LobeShare(d, "lambertian", 2);

@@ -55,10 +55,22 @@ configure() {  # configure DIR [cmake args...]: each folder always gets the same
     { cat "$dir.configure.log"; return 1; }
 }
 
-run_tests() {  # run_tests DIR LABEL
-  echo "== tests ($2)"
-  ctest --test-dir "$1" --output-on-failure --no-tests=error -j "$jobs" --timeout 900
+run_tests() {  # run_tests DIR LABEL [ctest args...]
+  local dir=$1 label=$2
+  shift 2
+  echo "== tests ($label)"
+  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j "$jobs" --timeout 900 "$@"
 }
+
+# Left out of the sanitized run: accuracy tests that run code smaller tests also run under the
+# sanitizers (the fit, the viewer-vs-Embree comparison), only on bigger inputs, and the install
+# test (packaging). They were ~510 of the sanitized suite's ~1600 CPU seconds (CI log, 2 cores);
+# the Release run keeps them all.
+asan_skip='^(ReflectanceFitGgx\.(NoiseFreeGgxPainting|DefaultNoiseLambertianStaysDiffuse)'
+asan_skip+='|ReflectanceFitSynth\.(NoiseFreeHeldOutPsnrAtLeast40dB|DefaultNoiseHeldOutPsnr'
+asan_skip+='|StressMaterials|MismatchedModelIsReported|RaySkippingChangesNothing)'
+asan_skip+='|ViewerTest\.(MatchesEmbreeReferenceAtPaperViews|GgxPackMatchesEmbreeReferenceAtPaperViews)'
+asan_skip+='|install_consumer)$'
 
 # Every C++ source and header of the project (tracked files in a git checkout, else the source
 # folders), for the formatting check.
@@ -156,7 +168,7 @@ case "$cmd" in
     configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_SANITIZE=ON -DDIGITIZE_BUILD_BENCH=OFF
     cmake --build build-asan -j "$jobs"
     ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-      DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan"
+      DIGITIZE_SANITIZED=1 run_tests build-asan "ASan+UBSan" -E "$asan_skip"
     build_fuzzers
     run_fuzzers "${DIGITIZE_FUZZ_SECONDS:-30}"
     ;;

@@ -304,6 +304,9 @@ class TexelProblem {
     log_base() = (base() > kLobeBaseEps).select(base().max(kLobeBaseEps).log(), kLogZero);
     base() = base().max(kLobeBaseEps);
   }
+  // The largest base over the samples for the direction set last: the lobe factor a sample
+  // nearest the peak sees is MaxBase()^k.
+  double MaxBase() { return static_cast<double>(View(kBase).head(n_).maxCoeff()); }
   // g (and dg/dcx, dg/dcy, dg/dt with t = log k) for the direction set last. The exponent is
   // <= 0 here up to rounding (|cx|, |cy| <= 1 keeps the base <= 1). Lobe values below
   // exp(kMinLobeLog) ~ 4e-18 of the peak are set to 0: they change nothing, and left in, their

@@ -36,6 +36,9 @@
 // peak, lobes of any height fit its tails equally well (up to the noise), and without it the fit
 // may pick a tall one whose peak hides between the lights, which relights terribly. It is a
 // tie-breaker at the noise level: an observed lobe's data outweigh it by orders of magnitude.
+// Where the Lafortune lobe does not explain the samples (chi-square test failed) and no sample
+// sees half its peak, the peak is not trusted: the lobe is widened to the k at which the
+// best-placed sample sees half the peak before the model choice (brdf_fit.cpp, ResolveLobe).
 //
 // TWO PATHS, one objective (same samples, init, prior and bounds; they differ only in the solver):
 //   kCeresReference: ceres::Solve on all 9 parameters (rho_d; rho_s as a fraction in [0, 1] of

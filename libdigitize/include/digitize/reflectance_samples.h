@@ -10,11 +10,14 @@
 //         in the scan frame (canvas_from_scan inverse), where cameras and lights live;
 //   n   = normals(x, y); directions go to its tangent frame (tangent_frame.h);
 //   v   = towards the camera (pinhole: the centre; orthographic: the axis), l = towards the light;
-//   rgb = bilinear interpolation of the photo at Camera::Project(p_scan);
+//   rgb = the mean of the photo's pixels whose centres fall in the texel's footprint (its cell
+//         [-1/2, 1/2)^2 mapped by the projection's Jacobian at Camera::Project(p_scan)): the
+//         pixels whose nearest texel is this one, so a texel next to another paint is not fitted
+//         to a blend of both; texels smaller than a pixel take the bilinear value there;
 //   E   = Light::IrradianceAt(p_scan) * (n.l)   (what multiplies f_r; brdf_fit.h).
 // A candidate (texel, photo) is REJECTED, in this order (each counted in SampleStats):
 //   behind the camera; outside the image; n.v <= min_cos (texel faces away); n.l <= min_cos
-//   (light below the texel's horizon); a NaN/Inf pixel among the 4 interpolated; a saturated
+//   (light below the texel's horizon); a NaN/Inf pixel among those averaged; a saturated
 //   pixel among them (only a lower bound of the radiance); black (every channel <= black_level:
 //   clipped at the sensor's floor, so the value is only an upper bound); hidden from the camera
 //   (a ray from p towards the camera meets the relief); shadowed (a ray from p towards the light
