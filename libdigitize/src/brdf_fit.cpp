@@ -154,7 +154,8 @@ void ResolveLobe(TexelProblem& problem, const BrdfFitOptions& options, double ex
   problem.SetLobeDirection(lobe.shape.cx, lobe.shape.cy);
   const double base = problem.MaxBase();
   const double k = std::exp(lobe.shape.t);
-  if (!(base > 0.0) || base >= 1.0 || std::pow(base, k) >= kResolvedLobeFactor) return;
+  // base is in [kLobeBaseEps, 1]: below the factor means base < 1, so its log is negative.
+  if (std::pow(base, k) >= kResolvedLobeFactor) return;
   const double k_resolved = std::max(options.k_min, std::log(kResolvedLobeFactor) / std::log(base));
   if (k_resolved >= k) return;
   lobe.shape.t = std::log(k_resolved);
@@ -181,10 +182,13 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
   // Chi-square test: with Gaussian noise sigma, the squared error of a right model over
   // dof = 3N - 3 residuals has mean dof sigma^2 and std sqrt(2 dof) sigma^2. The squared error
   // is weighted by the noise model (quantisation included), so sigma is the sensor's.
-  const double dof = 3.0 * problem.n() - 3.0;
+  // A model with p parameters leaves dof = 3N - p; what its squared error stays under:
   const double sigma2 = options.noise_sigma * options.noise_sigma;
+  const auto chi2_bound = [&](double dof) {
+    return sigma2 * (dof + std::max(0.0, options.diffuse_chi2_sigmas) * std::sqrt(2.0 * dof));
+  };
   if (options.diffuse_chi2_sigmas >= 0.0 &&
-      diffuse_sse <= sigma2 * (dof + options.diffuse_chi2_sigmas * std::sqrt(2.0 * dof))) {
+      diffuse_sse <= chi2_bound(3.0 * problem.n() - kDiffuseParameters)) {
     out.status = TexelFitStatus::kDiffuseOnly;
     return out;
   }
@@ -207,14 +211,9 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
     const Shape init = GridInit(problem, bounds);
     LobeFitOutcome lobe = LobeSolverFor(options.method)(problem, init, bounds, options);
     iterations += lobe.iterations;
-    if (!lobe.failed) {
-      // What a right model's squared error stays under (the chi-square test above, dof 3N - 9).
-      const double lobe_dof = std::max(1.0, 3.0 * problem.n() - kLafortuneParameters);
+    if (!lobe.failed)
       ResolveLobe(problem, options,
-                  sigma2 * (lobe_dof +
-                            std::max(0.0, options.diffuse_chi2_sigmas) * std::sqrt(2.0 * lobe_dof)),
-                  lobe);
-    }
+                  chi2_bound(std::max(1.0, 3.0 * problem.n() - kLafortuneParameters)), lobe);
     LafortuneParams p;
     for (int c = 0; c < 3; ++c) {
       p.rho_d[c] = static_cast<float>(lobe.linear.channel[c].a);
