@@ -11,7 +11,7 @@ set logscale x
 set grid
 set key bottom right
 set yrange [30:45]
-set xrange [1:500]
+set xrange [1:10000]
 plot "docs/bench_fit.csv" every ::3::4 using 13:14:1 with labels point pt 7 ps 1.5 offset 1,0.6 left notitle
 unset logscale
 set autoscale

@@ -23,6 +23,7 @@ set(DIGITIZE_CANVAS_SOURCES
   canvas_region.cpp    # region growing from a seed
   canvas_boundary.cpp  # boundary refinement to the frame step
   canvas_outline.cpp   # OpenCV calib3d (homography, minimum-area rectangle): the outline rectangle
+  canvas_frame.cpp     # the frame's boxes from the scan points around the outline
   resample.cpp         # ResampleToCanvasGrid: the driver and rasterisation
   resample_holes.cpp   # hole filling, texel states
   mask_ops.cpp    # OpenCV morphology shared by canvas.cpp and resample.cpp

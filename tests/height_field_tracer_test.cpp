@@ -243,6 +243,87 @@ TEST(HeightFieldTracer, SkippingChangesNothingOnARoughField) {
   EXPECT_GT(on.skipped, rays.size() / 20) << "the pyramid must prove some rays free";
   std::printf("[ rough field ] %zu rays: %zu skipped (%.1f %%), %zu traced, %zu blocked\n", on.rays,
               on.skipped, 100.0 * on.skipped / on.rays, on.traced, on.blocked);
+
+  // With frame boxes (one side without): the rays the relief cannot block but a box can.
+  f.frame.raise_mm = {2.0f, 0.5f, 0.0f, 3.5f};
+  f.frame.width_mm = {10.0f, 4.0f, 0.0f, 1.0f};
+  const HeightFieldTracer framed = BuildOrDie(f);
+  TraceStats framed_on, framed_off;
+  const std::vector<uint8_t> framed_skip = Occluded(framed, rays, true, &framed_on);
+  const std::vector<uint8_t> framed_all = Occluded(framed, rays, false, &framed_off);
+  differ = 0;
+  size_t more = 0;
+  for (size_t i = 0; i < rays.size(); ++i) {
+    differ += framed_skip[i] != framed_all[i];
+    more += framed_all[i] && !without[i];
+    EXPECT_FALSE(without[i] && !framed_all[i]) << "a box unblocked ray " << i;
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(more, rays.size() / 50) << "the boxes must block a fair share more";
+  EXPECT_GT(framed_on.skipped, rays.size() / 20);
+}
+
+// The frame's boxes (height_field.h, FrameBoxes) around a flat canvas: a texel at distance s from
+// the left side is shadowed by a box of raise R for a light over that side at elevation e iff
+// s < R / tan(e); a ray over the other sides' boxes at the same elevation is blocked by them
+// only as far as their own raise reaches; skipping changes nothing; a camera ray meeting a box
+// first reports the frame, not the canvas.
+TEST(HeightFieldTracer, FrameBoxesShadowTheEdgeAsTheirRaiseSays) {
+  constexpr double kPitch = 1.0;
+  HeightField f = test::MakeTexelField(60, 40, kPitch, [](int, int) { return 0.0f; });
+  f.frame.raise_mm = {10.0f, 5.0f, 0.0f, 20.0f};  // left, right, bottom (none), top
+  f.frame.width_mm = {30.0f, 30.0f, 0.0f, 30.0f};
+  const HeightFieldTracer t = BuildOrDie(f);
+  const double e = Deg(30);
+  struct Side {
+    double azimuth;  // towards the side
+    float raise;
+    int axis_length;
+  };
+  const Side sides[4] = {{std::numbers::pi, 10.0f, 60},
+                         {0.0, 5.0f, 60},
+                         {-std::numbers::pi / 2, 0.0f, 40},
+                         {std::numbers::pi / 2, 20.0f, 40}};
+  for (int side = 0; side < 4; ++side) {
+    Rays rays;
+    std::vector<double> distance;
+    // A row (column) through the middle of the canvas, towards the side.
+    for (int i = 0; i < sides[side].axis_length; ++i) {
+      const int x = side < 2 ? i : 30, y = side < 2 ? 20 : i;
+      const Vec3f p = SurfacePoint(f, x, y);
+      distance.push_back(side == 0   ? p.x()
+                         : side == 1 ? 60 * kPitch - p.x()
+                         : side == 2 ? p.y()
+                                     : 40 * kPitch - p.y());
+      rays.Add(p, Direction(sides[side].azimuth, e));
+    }
+    for (bool skip : {true, false}) {
+      const std::vector<uint8_t> blocked = Occluded(t, rays, skip);
+      for (size_t i = 0; i < rays.size(); ++i) {
+        const bool shadow = distance[i] < sides[side].raise / std::tan(e);
+        EXPECT_EQ(blocked[i], shadow ? 1 : 0)
+            << "side " << side << " skip " << skip << " distance " << distance[i] << " mm";
+      }
+    }
+  }
+  // A point light inside the box's reach but closer than the box: not blocked (tfar).
+  Rays near;
+  near.Add(SurfacePoint(f, 2, 20), Direction(std::numbers::pi, e), 1.0f);
+  EXPECT_EQ(Occluded(t, near)[0], 0);
+
+  // Camera rays straight down: over the canvas they hit it, over a box the frame, over the side
+  // without a box nothing.
+  std::vector<Vec3f> origins = {{30.5f, 20.5f, 100}, {-10, 20.5f, 100}, {30.5f, -5, 100}};
+  std::vector<Vec3f> down(origins.size(), Vec3f(0, 0, -1));
+  std::vector<SurfaceHit> hits(origins.size());
+  t.Intersect(origins, down, hits);
+  EXPECT_TRUE(hits[0].hit && !hits[0].frame);
+  EXPECT_TRUE(!hits[1].hit && hits[1].frame);
+  EXPECT_TRUE(!hits[2].hit && !hits[2].frame);
+
+  // Invalid boxes are an error of Build.
+  f.frame.width_mm[0] = -1.0f;
+  EXPECT_FALSE(HeightFieldTracer::Build(f).ok());
 }
 
 TEST(HeightFieldTracer, ManyThreadsWithShortSpansAgreeWithOneCall) {

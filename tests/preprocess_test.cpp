@@ -7,10 +7,13 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
+#include <string>
 
 #include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -87,6 +90,37 @@ TEST(Preprocess, DefaultSyntheticScanMeetsAccuracyTargets) {
   std::printf(
       "default noise %.3f mm: tilt err %.4f deg, IoU %.5f, RMSE %.4f mm, normals median %.3f deg\n",
       scan.noise_mm, a.normal_error_deg, a.mask_iou, a.height_rmse_mm, a.normals_median_deg);
+}
+
+// The frame's boxes go from the scan into the height field and through the canvas folder
+// (transform.json, "frame") unchanged; a frame entry that is no frame is an error naming the file.
+// Accuracy of the boxes themselves: canvas_test (FrameBoxesMatchTheFrame).
+TEST(Preprocess, FrameBoxesRoundTripThroughTheCanvasFolder) {
+  synth::ScanSimOptions scan;
+  scan.width_px = scan.height_px = 256;
+  const PipelineRun run = RunPipeline(DefaultPainting(), synth::FrameOptions{}, scan);
+  ASSERT_TRUE(run.result.ok()) << run.result.error().message;
+  const FrameBoxes& frame = run.result->field.frame;
+  ASSERT_TRUE(frame.any());
+  EXPECT_EQ(frame.raise_mm, run.result->canvas.frame.raise_mm);
+  const std::filesystem::path dir = test::FreshScratchDir("preprocess_frame", "", false);
+  ASSERT_TRUE(WritePreprocessOutputs(dir, *run.result, PreprocessOptions{}, {"scan"}).ok());
+  const Result<PreprocessedCanvas> read = ReadPreprocessOutputs(dir);
+  ASSERT_TRUE(read.ok()) << read.error().message;
+  for (int side = 0; side < 4; ++side) {
+    EXPECT_FLOAT_EQ(read->field.frame.raise_mm[side], frame.raise_mm[side]);
+    EXPECT_FLOAT_EQ(read->field.frame.width_mm[side], frame.width_mm[side]);
+  }
+  std::string text = test::ReadFileBytes(dir / "transform.json");
+  const size_t at = text.find("\"width_mm\"");
+  ASSERT_NE(at, std::string::npos);
+  text.insert(text.find_first_of("0123456789", at), "-");  // a negative width
+  test::WriteFileBytes(dir / "transform.json", text);
+  const Result<PreprocessedCanvas> bad = ReadPreprocessOutputs(dir);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("transform.json"), std::string::npos) << bad.error().message;
+  EXPECT_NE(bad.error().message.find("width_mm"), std::string::npos) << bad.error().message;
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Preprocess, NoiseFreeScanGivesAccurateNormals) {

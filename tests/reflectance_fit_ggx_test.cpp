@@ -100,7 +100,10 @@ std::vector<RegionScore> ScoreByRegion(const Case& c, int margin) {
 }
 
 // frame: the generator's default raised frame around the canvas (false: the canvas alone).
-Case FitGgxPainting(bool noise, ReflectanceFitOptions options = {}, bool frame = true) {
+// frame_known: the canvas carries the frame's boxes (height_field.h), as a canvas measured from a
+// scan of the framed painting does; false: the fit sees the canvas alone.
+Case FitGgxPainting(bool noise, ReflectanceFitOptions options = {}, bool frame = true,
+                    bool frame_known = true) {
   const synth::GgxPaintingCase setup = synth::MakeGgxPaintingCase(96);
   Case c;
   c.painting = synth::MakePainting(setup.painting);
@@ -113,6 +116,7 @@ Case FitGgxPainting(bool noise, ReflectanceFitOptions options = {}, bool frame =
     so.encoding = synth::PhotoEncoding::kLinearExr;
   }
   c.photos = synth::SimulatePhotoSet(scene, RigidTransform{}, so, setup.materials);
+  if (frame_known) c.painting.truth.frame = frame_options.Boxes();
   // The fit's sensor noise: the photos' sigma, or float rounding for noise-free EXR.
   options.fit.noise_sigma = noise ? so.noise_sigma : 1e-3;
   auto fit = FitReflectance(c.painting.truth, c.painting.normals, {}, c.photos.fit, options);
@@ -178,52 +182,61 @@ ReflectanceFitOptions LafortuneOnlyOptions() {
 }
 
 // Noise-free photos of GGX paints: the GGX candidate matches them, so relighting is close to
-// exact wherever a texel's samples are of its own paint. Measured (96 x 96 texels): texels 2 from
-// another paint and the canvas edge 43.8 dB pooled, every region >= 40.8 dB (varnish); all texels
-// 33.1 dB. Two things made the interior figure (37.1 dB before them): footprint sampling
-// (reflectance_samples.h: a texel's sample is the mean of the pixels whose nearest texel it is,
-// not a bilinear blend with its neighbours') and widening lobes whose unseen peak a misfit had
-// pushed to the energy bound (brdf_fit.cpp, ResolveLobe). Two thirds of what the all-texel figure
-// loses is on the two texels next to the frame: the canvas model holds no frame, so photo pixels
-// the 25 mm frame hides or shadows there are fitted as paint (without the frame, next test, all
-// texels reach 38.2 dB). The one-lobe Lafortune fit alone gets 20 dB less inside.
+// exact wherever a texel's samples are of its own paint. Measured (96 x 96 texels, the canvas
+// carrying the generator's frame as boxes, as one measured from a scan does): all texels 40.8 dB
+// pooled, every region >= 36.0 dB (varnish); texels 2 from another paint and the canvas edge
+// 45.1 dB, every region >= 40.8 dB. What made the all-texel figure (33.1 dB before them):
+//   - the frame's boxes in the ray tests (height_field.h, FrameBoxes): the pixels the 25 mm frame
+//     hides or shadows near the edge are no longer fitted as paint (33.9 -> 40.8 dB with pixel
+//     maps; 33.1 -> 37.7 without);
+//   - pixel maps (reflectance_samples.h): a texel's sample is the mean of the pixels whose rays
+//     see it, and a texel no pixel sees in a photo has no sample there, where the bilinear value
+//     was its neighbours' paint (an oblique camera steps over one texel column in ~12: one
+//     varnish texel next to the gold leaf read as gold);
+// and, for the interior figure (37.1 dB before them), footprint sampling and widening lobes whose
+// unseen peak a misfit had pushed to the energy bound (brdf_fit.cpp, ResolveLobe). What remains
+// is mostly on texels next to another paint, whose pixels see the bilinear normal field at other
+// places than the texel centre. The one-lobe Lafortune fit alone gets 20 dB less inside.
 TEST(ReflectanceFitGgx, NoiseFreeGgxPainting) {
   const Case c = FitGgxPainting(false);
   ASSERT_EQ(c.interior.size(), 7u);  // 6 regions + all
-  EXPECT_GE(c.interior.back().psnr_db, 41.0);
-  EXPECT_GE(c.regions.back().psnr_db, 31.5);
+  ASSERT_EQ(c.regions.size(), 7u);
+  EXPECT_GE(c.regions.back().psnr_db, 39.5);
+  EXPECT_GE(c.interior.back().psnr_db, 44.0);
   EXPECT_GT(c.interior.back().pixels, 50000u);
   for (size_t i = 0; i + 1 < c.interior.size(); ++i) {
-    EXPECT_GE(c.interior[i].psnr_db, 38.0) << c.interior[i].name;
+    EXPECT_GE(c.regions[i].psnr_db, 34.5) << c.regions[i].name;
+    EXPECT_GE(c.interior[i].psnr_db, 39.5) << c.interior[i].name;
     EXPECT_GT(c.interior[i].pixels, 2000u) << c.interior[i].name;
   }
   // The model choice: GGX wherever the paint has a lobe.
   EXPECT_GT(c.fit.report.fit.lobes_by_model[static_cast<size_t>(ReflectanceModel::kGgx)],
             c.fit.report.fit.texels / 2);
 
+  // The same photos, the canvas without its frame's boxes (measured 33.9 dB).
+  const Case unknown = FitGgxPainting(false, {}, true, false);
+  EXPECT_GT(c.regions.back().psnr_db, unknown.regions.back().psnr_db + 4.0);
   const Case before = FitGgxPainting(false, LafortuneOnlyOptions());
   EXPECT_GT(c.interior.back().psnr_db, before.interior.back().psnr_db + 10.0);
 }
 
-// The same painting without its frame: every texel's photo pixels are of the canvas. Measured:
-// all texels 38.2 dB pooled, every region >= 34.9 dB (varnish; satin 39.5, gold 36.1), inside
-// 45.0 dB. What remains is mostly on boundary texels: a texel whose footprint a paint boundary
-// crosses holds two paints, which no per-texel model relights exactly.
+// The same painting without its frame. Measured: all texels 40.5 dB pooled, every region >= 36.3
+// dB (varnish), inside 45.0 dB.
 TEST(ReflectanceFitGgx, NoiseFreeGgxPaintingWithoutFrame) {
   const Case c = FitGgxPainting(false, {}, false);
   ASSERT_EQ(c.regions.size(), 7u);
-  EXPECT_GE(c.regions.back().psnr_db, 37.5);
+  EXPECT_GE(c.regions.back().psnr_db, 39.5);
   for (size_t i = 0; i + 1 < c.regions.size(); ++i)
-    EXPECT_GE(c.regions[i].psnr_db, 34.0) << c.regions[i].name;
-  EXPECT_GE(c.interior.back().psnr_db, 43.0);
+    EXPECT_GE(c.regions[i].psnr_db, 34.5) << c.regions[i].name;
+  EXPECT_GE(c.interior.back().psnr_db, 44.0);
 }
 
-// 8-bit sRGB photos with sensor noise 0.002: the Lambertian paint relights at 56 dB inside its
+// 8-bit sRGB photos with sensor noise 0.002: the Lambertian paint relights at 57 dB inside its
 // region and keeps far fewer lobes than the fit before GGX, BIC and the quantisation term
-// (measured 2.1 % of its interior texels with a lobe, 5.7 % of all, against 68 % and 70 % for
-// the one-lobe fit without the quantisation term). What lobes remain are not noise: they sit where
-// samples disagree with any BRDF (a shadow edge or a steep relief wall inside a texel's footprint,
-// the frame's edge).
+// (measured 1.9 % of its interior texels with a lobe, 2.7 % of all, against 71 % for the
+// one-lobe fit without the quantisation term); all texels 41.1 dB pooled. What lobes remain are not
+// noise: they sit where samples disagree with any BRDF (a shadow edge or a steep relief wall inside
+// a texel's footprint, the frame's edge).
 TEST(ReflectanceFitGgx, DefaultNoiseLambertianStaysDiffuse) {
   const Case c = FitGgxPainting(true);
   EXPECT_EQ(c.fit.report.quantisation.code_max, 255);
@@ -235,7 +248,15 @@ TEST(ReflectanceFitGgx, DefaultNoiseLambertianStaysDiffuse) {
   std::printf("  lambertian texels with a lobe: %.2f %% inside, %.2f %% of all\n", 100.0 * share,
               100.0 * share_all);
   EXPECT_LE(share, 0.05);
-  EXPECT_LE(share_all, 0.10);
+  EXPECT_LE(share_all, 0.06);
+  // The targets at default noise: Lambertian paint >= 42 dB over all its texels (measured
+  // 55.9), and the whole painting as noise-free within ~2 dB (measured 41.1; varnish 36.0).
+  const RegionScore* lambert_all = Find(c.regions, "lambertian");
+  ASSERT_NE(lambert_all, nullptr);
+  EXPECT_GE(lambert_all->psnr_db, 42.0);
+  EXPECT_GE(c.regions.back().psnr_db, 39.0);
+  for (size_t i = 0; i + 1 < c.regions.size(); ++i)
+    EXPECT_GE(c.regions[i].psnr_db, 33.0) << c.regions[i].name;
 
   const Case d = FitGgxPainting(true, LafortuneOnlyOptions());
   const double share_before = LobeShare(d, "lambertian", 2);

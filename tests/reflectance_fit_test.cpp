@@ -115,6 +115,93 @@ TEST(ReflectanceSamples, FlatCanvasSamplesAreExact) {
   EXPECT_EQ(stats.shadowed + stats.hidden, 0u);
 }
 
+// Pixel maps (MapPixelsToTexels) against the analytic ray-plane intersection: an orthographic
+// camera tilted 40 degrees about the canvas Y axis over a flat canvas, its pixels 1.1 texels apart
+// along X on the canvas (0.84 along Y, so 1.08 pixels per texel of area): every pixel's texel is
+// the one nearest to where its ray meets the plane; photos of the one camera share one map; a
+// texel whose column the pixels step over has no sample in the photo (with the map), where
+// without it the bilinear value blends its neighbours.
+TEST(ReflectanceSamples, PixelMapsSeeWhatTheRaysSee) {
+  const int w = 40, h = 30;
+  const HeightField canvas = FlatCanvas(w, h);
+  const double a = 40.0 * M_PI / 180.0;
+  Camera cam;
+  cam.model = CameraModel::kOrthographic;
+  cam.width = 36;
+  cam.height = 34;
+  cam.pixel_pitch_mm = 1.1 * kPitch * std::cos(a);
+  cam.cx = (cam.width - 1) / 2.0;
+  cam.cy = (cam.height - 1) / 2.0;
+  cam.camera_from_scan.rotation << std::cos(a), 0, std::sin(a), 0, -1, 0, std::sin(a), 0,
+      -std::cos(a);
+  const Vec3d centre(w * kPitch / 2, h * kPitch / 2, 0);
+  cam.camera_from_scan.translation = -(cam.camera_from_scan.rotation * centre) + Vec3d(0, 0, 1000);
+  PhotoSet set;
+  set.source = "tilted.json";
+  for (int i = 0; i < 2; ++i) {
+    Photo p;
+    p.entry = "tilted.json: images[" + std::to_string(i) + "]";
+    p.camera = cam;
+    p.light = Directional(50 + 10 * i, 30 * i);
+    p.encoding = ColourEncoding::kLinear;
+    // Pixel colour = its texel's column index, so a sample tells which pixels it averaged.
+    p.rgb = Grid<Vec3f>(cam.width, cam.height, Vec3f::Zero());
+    set.photos.push_back(std::move(p));
+  }
+  auto tracer = HeightFieldTracer::Build(canvas);
+  ASSERT_TRUE(tracer.ok());
+  const PixelTexelMaps maps = MapPixelsToTexels(set, canvas, RigidTransform{}, *tracer);
+  ASSERT_EQ(maps.maps.size(), 1u);
+  EXPECT_EQ(maps.of_photo, (std::vector<uint32_t>{0, 0}));
+  EXPECT_EQ(maps.rays, static_cast<size_t>(cam.width * cam.height));
+  std::vector<int> pixels_of_column(w, 0);
+  for (int v = 0; v < cam.height; ++v)
+    for (int u = 0; u < cam.width; ++u) {
+      Vec3d o, d;
+      cam.Ray(u, v, o, d);
+      const Vec3d hit = o + (-o.z() / d.z()) * d;
+      const Eigen::Vector2d t = canvas.TexelFromMm(hit.x(), hit.y());
+      const int tx = static_cast<int>(std::lround(t.x())),
+                ty = static_cast<int>(std::lround(t.y()));
+      const uint32_t expect =
+          tx >= 0 && ty >= 0 && tx < w && ty < h ? static_cast<uint32_t>(ty * w + tx) : kNoTexel;
+      ASSERT_EQ(maps.maps[0](u, v), expect) << "pixel (" << u << ", " << v << ")";
+      if (expect != kNoTexel) {
+        ++pixels_of_column[tx];
+        for (Photo& p : set.photos) p.rgb(u, v) = Vec3f::Constant(static_cast<float>(tx));
+      }
+    }
+  // Along one row of texels in the middle of the view: the columns no pixel sees.
+  const int row = h / 2;
+  std::vector<uint32_t> texels;
+  int unseen = 0;
+  for (int x = 12; x < 28; ++x) {
+    texels.push_back(static_cast<uint32_t>(row * w + x));
+    unseen += pixels_of_column[x] == 0;
+  }
+  ASSERT_GT(unseen, 0) << "pixels 1.1 texels apart must step over some column";
+  const Grid<Vec3f> normals = UpNormals(canvas);
+  for (bool with_maps : {true, false}) {
+    const SampleScene scene{&canvas, &normals, RigidTransform{},
+                            &set,    &*tracer, with_maps ? &maps : nullptr};
+    BrdfSamples samples;
+    SampleStats stats;
+    GatherSamples(scene, texels, {}, samples, stats);
+    int blended = 0;
+    for (size_t k = 0; k < texels.size(); ++k) {
+      const int x = static_cast<int>(texels[k] % w);
+      for (const BrdfSample& s : samples.Texel(k)) {
+        if (with_maps)
+          EXPECT_FLOAT_EQ(s.radiance.x(), static_cast<float>(x)) << "texel column " << x;
+        blended += s.radiance.x() != static_cast<float>(x);
+      }
+      if (with_maps) EXPECT_EQ(samples.Texel(k).size(), pixels_of_column[x] ? 2u : 0u) << x;
+    }
+    if (with_maps) EXPECT_EQ(stats.hidden, 2u * unseen);
+    if (!with_maps) EXPECT_GE(blended, 2 * unseen) << "the bilinear fallback blends columns";
+  }
+}
+
 TEST(ReflectanceFit, RecoversAGlossyFlatMaterialExactly) {
   const HeightField canvas = FlatCanvas(8, 8);
   LafortuneParams m;

@@ -85,6 +85,16 @@ double FrameOptions::Width(int side) const {
   return side >= 0 && side < 4 && sides[side] > 0 ? sides[side] : width_mm;
 }
 
+FrameBoxes FrameOptions::Boxes() const {
+  FrameBoxes boxes;
+  if (!enabled) return boxes;
+  for (int side = 0; side < 4; ++side) {
+    boxes.raise_mm[side] = static_cast<float>(raise_mm);
+    boxes.width_mm[side] = static_cast<float>(Width(side));
+  }
+  return boxes;
+}
+
 struct Scene::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;

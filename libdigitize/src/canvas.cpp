@@ -264,6 +264,10 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   }
   result.seed_x = region->seed_x;
   result.seed_y = region->seed_y;
+
+  // ---- 7. The frame's boxes.
+  result.frame = MeasureFrameBoxes(xyz, result.mask_scan, result.canvas_from_scan, result.extent_mm,
+                                   noise_sigma);
   return result;
 }
 

@@ -133,4 +133,14 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
                    const cv::Mat& fit_mask, const LocalFrame& frame, double noise_sigma,
                    double spacing);
 
+// ---- 7. The frame's boxes (canvas_frame.cpp). Per side, the scan points outside the canvas
+// outline, at most kFrameBandMm from it, within the side's span along the outline: the box's
+// raise is a high quantile of their heights (the moulding's top; a quantile, so that a few
+// spikes do not lift it), its width from a quantile of the outward distance of the points above
+// half that raise (canvas_frame.cpp says why). A side with too few points, or whose raise is within
+// the scan noise of the canvas plane, gets no box.
+FrameBoxes MeasureFrameBoxes(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask_scan,
+                             const RigidTransform& canvas_from_scan,
+                             const Eigen::Vector2d& extent_mm, double noise_sigma_mm);
+
 }  // namespace digitize::canvas_detail

@@ -114,6 +114,9 @@ struct HeightFieldTracer::Impl {
   int width = 0, height = 0;
   double pitch_mm = 0, inv_pitch_mm = 0;
   float max_height_mm = 0;
+  FrameBoxes frame;          // the field's frame boxes (none: frame_geometry is invalid)
+  float frame_raise_mm = 0;  // highest side's raise
+  unsigned frame_geometry = RTC_INVALID_GEOMETRY_ID;
   std::vector<float> vertices;  // x, y, z of (w + 2) x (h + 2) vertices, + 1 float for Embree's
                                 // 16-byte loads
   std::vector<std::vector<float>> levels;      // levels[k - 1]: maxima of 2^k blocks, k >= 1
@@ -131,6 +134,8 @@ struct HeightFieldTracer::Impl {
         std::string("height-field tracer: ") + what + ": " +
         (last_error.empty() ? "Embree error " + std::to_string(static_cast<int>(e)) : last_error)};
   }
+
+  Status AttachFrameBoxes(const FrameBoxes& frame);
 
   // Height of texel (x, y): vertex (x + 1, y + 1) of the buffer (the outline ring is row and
   // column 0).
@@ -266,12 +271,102 @@ struct HeightFieldTracer::Impl {
     }
     return cut(bound);
   }
+
+  // CutRay with the frame boxes: a ray the relief cannot block may still meet a side's box, and
+  // only where it leaves the canvas rectangle below the highest raise. Such a ray is traced up
+  // to where it rises above every box (Embree finds which box, if any, it meets).
+  float CutRayFramed(const Vec3f& o, const Vec3f& d, float tfar, float offset) const {
+    const float t = CutRay(o, d, tfar, offset);
+    if (frame_raise_mm <= 0.0f || !(d.z() > 0.0f)) return t;  // no frame, or traced as it is
+    const double lifted_z = static_cast<float>(o.z() + offset);
+    const double t_above = (frame_raise_mm - lifted_z) / d.z();
+    if (t_above <= 0.0) return t;  // starts above every box
+    // Where the ray's horizontal path leaves [0, W] x [0, H] (0 for an origin outside it).
+    const double W = width * pitch_mm, H = height * pitch_mm;
+    const auto exit_along = [](double p, double dp, double hi) {
+      if (p < 0.0 || p > hi) return 0.0;
+      if (dp > 0.0) return (hi - p) / dp;
+      if (dp < 0.0) return -p / dp;
+      return std::numeric_limits<double>::infinity();
+    };
+    const double t_exit = std::min(exit_along(o.x(), d.x(), W), exit_along(o.y(), d.y(), H));
+    if (t_exit >= std::min<double>(tfar, t_above)) return t;
+    const float t_frame =
+        static_cast<float>(std::min<double>(tfar, t_above * (1 + kReachSlack) + offset));
+    return std::max(t, t_frame);
+  }
 };
 
 HeightFieldTracer::HeightFieldTracer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 HeightFieldTracer::HeightFieldTracer(HeightFieldTracer&&) noexcept = default;
 HeightFieldTracer& HeightFieldTracer::operator=(HeightFieldTracer&&) noexcept = default;
 HeightFieldTracer::~HeightFieldTracer() = default;
+
+// The frame boxes as one triangle mesh (12 triangles per box). Corners belong to the left and
+// right boxes, which span the bottom and top widths (and gaps) too, and the bottom and top boxes
+// reach them, so a grazing ray cannot pass between two boxes. The boxes start one pitch below the
+// canvas plane: rays from the canvas start above it.
+Status HeightFieldTracer::Impl::AttachFrameBoxes(const FrameBoxes& frame) {
+  Impl& impl = *this;
+  if (Status s = frame.Validate(); !s.ok()) return Error{"height-field tracer: " + s.message()};
+  const float W = static_cast<float>(impl.width * impl.pitch_mm);
+  const float H = static_cast<float>(impl.height * impl.pitch_mm);
+  const float z0 = static_cast<float>(-impl.pitch_mm);
+  const auto& w = frame.width_mm;
+  struct Box {
+    float x0, x1, y0, y1, z1;
+  };
+  std::vector<Box> boxes;
+  // A side with a raise but no width still blocks: a thin wall of one pitch.
+  const float min_w = static_cast<float>(impl.pitch_mm);
+  const auto width_of = [&](int side) { return std::max(w[side], min_w); };
+  const auto& gap = frame.gap_mm;
+  // Outer edges of the bottom and top boxes (Y), inner edges of the left and right ones (X).
+  const float y0 = frame.raise_mm[2] > 0 ? -gap[2] - width_of(2) : 0.0f;
+  const float y1 = frame.raise_mm[3] > 0 ? H + gap[3] + width_of(3) : H;
+  const auto& r = frame.raise_mm;
+  if (r[0] > 0) boxes.push_back({-gap[0] - width_of(0), -gap[0], y0, y1, r[0]});
+  if (r[1] > 0) boxes.push_back({W + gap[1], W + gap[1] + width_of(1), y0, y1, r[1]});
+  // The bottom and top boxes reach the left and right ones' inner edges (over their gaps).
+  const float x0 = r[0] > 0 ? -gap[0] : 0.0f, x1 = r[1] > 0 ? W + gap[1] : W;
+  if (r[2] > 0) boxes.push_back({x0, x1, y0, -gap[2], r[2]});
+  if (r[3] > 0) boxes.push_back({x0, x1, H + gap[3], y1, r[3]});
+
+  RTCGeometry g = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
+      g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 8 * boxes.size()));
+  auto* triangles = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+      g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), 12 * boxes.size()));
+  if (Status s = impl.EmbreeStatus("frame buffers"); !s.ok() || !vertices || !triangles) {
+    rtcReleaseGeometry(g);
+    return Error{s.ok() ? "height-field tracer: frame buffer allocation failed" : s.message()};
+  }
+  // Corner i of a box: bit 0 picks x1, bit 1 y1, bit 2 z1; two triangles per face.
+  static constexpr unsigned kFaces[6][4] = {{0, 2, 6, 4}, {1, 5, 7, 3}, {0, 4, 5, 1},
+                                            {2, 3, 7, 6}, {0, 1, 3, 2}, {4, 6, 7, 5}};
+  for (size_t b = 0; b < boxes.size(); ++b) {
+    const Box& box = boxes[b];
+    for (unsigned i = 0; i < 8; ++i) {
+      float* p = vertices + 3 * (8 * b + i);
+      p[0] = (i & 1) ? box.x1 : box.x0;
+      p[1] = (i & 2) ? box.y1 : box.y0;
+      p[2] = (i & 4) ? box.z1 : z0;
+    }
+    for (int f = 0; f < 6; ++f) {
+      unsigned* t = triangles + 3 * (12 * b + 2 * f);
+      const unsigned base = static_cast<unsigned>(8 * b);
+      const unsigned* q = kFaces[f];
+      t[0] = base + q[0], t[1] = base + q[1], t[2] = base + q[2];
+      t[3] = base + q[0], t[4] = base + q[2], t[5] = base + q[3];
+    }
+  }
+  rtcCommitGeometry(g);
+  impl.frame_geometry = rtcAttachGeometry(impl.scene, g);
+  rtcReleaseGeometry(g);
+  impl.frame = frame;
+  impl.frame_raise_mm = frame.max_raise_mm();
+  return impl.EmbreeStatus("frame geometry");
+}
 
 Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   const int w = field.width(), h = field.height();
@@ -369,6 +464,9 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   rtcCommitGeometry(g);
   rtcAttachGeometry(impl->scene, g);
   rtcReleaseGeometry(g);
+  if (field.frame.any()) {
+    if (Status s = impl->AttachFrameBoxes(field.frame); !s.ok()) return Error{s.message()};
+  }
   rtcCommitScene(impl->scene);
   if (Status s = impl->EmbreeStatus("scene build"); !s.ok()) return Error{s.message()};
 
@@ -411,7 +509,7 @@ void HeightFieldTracer::Occluded(std::span<const Vec3f> origins, std::span<const
                        "HeightFieldTracer::Occluded: ray " + std::to_string(i) +
                            " has a non-finite origin, direction or tfar");
         blocked[i] = 0;
-        const float t_max = skip ? impl.CutRay(o, d, tfar[i], offset) : tfar[i];
+        const float t_max = skip ? impl.CutRayFramed(o, d, tfar[i], offset) : tfar[i];
         if (skip && t_max < 0.0f) continue;
         RTCRay& ray = rays[m];
         ray.org_x = o.x();
@@ -504,6 +602,10 @@ void HeightFieldTracer::Intersect(std::span<const Vec3f> origins, std::span<cons
         SurfaceHit& out = hits[first + k];
         out = SurfaceHit{};
         if (r.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        if (r.hit.geomID == impl.frame_geometry) {
+          out.frame = true;  // the frame hides the canvas along this ray
+          continue;
+        }
         const double t = r.ray.tfar;
         const double X = r.ray.org_x + t * r.ray.dir_x, Y = r.ray.org_y + t * r.ray.dir_y;
         out.hit = true;

@@ -110,6 +110,18 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
           (c.outline_fitted ? "; axes and mask from the canvas outline"
                             : "; outline not used (" + c.outline_note + "): PCA axes") +
           [&] {
+            // The frame the fit's rays will see, side by side (none: nothing rises around it).
+            std::string text = "; frame:";
+            bool any = false;
+            for (int side = 0; side < 4; ++side) {
+              if (c.frame.raise_mm[side] <= 0) continue;
+              text += Format("%s %s %.1f mm high x %.1f wide", any ? "," : "",
+                             kFrameSideNames[side], c.frame.raise_mm[side], c.frame.width_mm[side]);
+              any = true;
+            }
+            return any ? text : std::string("; frame: none");
+          }() +
+          [&] {
             std::string text;
             for (const std::string& w : c.warnings) text += "; WARNING: " + w;
             return text;
@@ -121,6 +133,7 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
       ResampleToCanvasGrid(scan, result.canvas, options.resample, &result.resample);
   if (!field.ok()) return field.error();
   result.field = std::move(field).value();
+  result.field.frame = result.canvas.frame;
   const ResampleStats& rs = result.resample;
   step("resample", t0,
        Format("resample: %dx%d texels at %.4f mm; %zu measured, %zu filled in %zu small hole(s), "
@@ -324,6 +337,15 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
       {"size_texels", {f.width(), f.height()}},
       {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
       {"texel_centre", "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
+  if (f.frame.any()) {
+    json frame = json::object();
+    for (int side = 0; side < 4; ++side)
+      if (f.frame.raise_mm[side] > 0)
+        frame[kFrameSideNames[side]] = {{"raise_mm", f.frame.raise_mm[side]},
+                                        {"width_mm", f.frame.width_mm[side]},
+                                        {"gap_mm", f.frame.gap_mm[side]}};
+    transform["frame"] = frame;
+  }
   if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
 
   return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
@@ -356,6 +378,20 @@ void ReadTransformFile(const std::filesystem::path& path, PreprocessedCanvas& ou
   const Mat3d& R = out.canvas_from_scan.rotation;
   if ((R * R.transpose() - Mat3d::Identity()).norm() > 1e-4 || R.determinant() < 0)
     Fail(file + ": canvas_from_scan.rotation is not a rotation");
+  // Optional (older folders have none): the frame's boxes, per side present.
+  if (top.Has("frame")) {
+    const Fields frame = top.Object("frame");
+    frame.OnlyKeys({"left", "right", "bottom", "top"});
+    for (int side = 0; side < 4; ++side) {
+      if (!frame.Has(kFrameSideNames[side])) continue;
+      const Fields box = frame.Object(kFrameSideNames[side]);
+      box.OnlyKeys({"raise_mm", "width_mm", "gap_mm"});
+      out.field.frame.raise_mm[side] = static_cast<float>(box.Number("raise_mm"));
+      out.field.frame.width_mm[side] = static_cast<float>(box.Number("width_mm"));
+      out.field.frame.gap_mm[side] = static_cast<float>(box.Number("gap_mm"));
+    }
+    if (Status s = out.field.frame.Validate(); !s.ok()) Fail(file + ": " + s.message());
+  }
 }
 
 // boxes.json: the bump plane, H, the cell size and the boxes, each inside the w x h grid.

@@ -231,8 +231,15 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
   ReflectanceFitReport& report = result.report;
   report.seconds_tracer = Since(t0);
 
-  const SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
+  SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
   if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
+  PixelTexelMaps pixel_maps;
+  if (options.pixel_texel_maps) {
+    t0 = Clock::now();
+    pixel_maps = MapPixelsToTexels(photos, canvas, canvas_from_scan, *tracer);
+    scene.pixel_texels = &pixel_maps;
+    report.seconds_samples += Since(t0);
+  }
   CountPhotoDirections(photos, canvas, canvas_from_scan, report);
   const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
   if (report.distinct_directions < needed) {

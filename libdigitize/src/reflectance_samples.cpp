@@ -1,5 +1,6 @@
 #include "digitize/reflectance_samples.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -30,6 +31,8 @@ std::string Count(size_t n) {
 struct PixelSample {
   Vec3f rgb = Vec3f::Zero();
   uint8_t flags = 0;
+  bool seen = false;    // pixels of a pixel map see the texel: it is visible, no ray needed
+  bool hidden = false;  // the footprint holds pixels, and none of them sees the texel
 };
 
 PixelSample Bilinear(const Photo& photo, double u, double v) {
@@ -64,14 +67,24 @@ PixelSample Bilinear(const Photo& photo, double u, double v) {
 // texels 2 from a boundary 37.1 -> 39.3 dB). Texels smaller than a pixel (no centre inside) fall
 // back to the bilinear sample; footprints over kMaxFootprintSide pixels a side are sampled on a
 // sparser lattice, so a sample never costs more than ~kMaxFootprintSide^2 reads.
-constexpr int kMaxFootprintSide = 8;
 
-PixelSample Footprint(const Photo& photo, const Eigen::Vector2d& px, const Eigen::Matrix2d& j) {
+//
+// With a pixel map (`owner`: the texel each pixel sees) the sample is instead the mean of the
+// pixels around the footprint that see this texel, `texel`: relief parallax moves a pixel or two
+// between neighbouring cells (a 0.5 mm stroke seen at 30 degrees shifts its hits by 0.3 mm), the
+// frame hides whole cells, and the renderers assign pixels by what their rays hit. The window is
+// the footprint's bounding box and kParallaxMarginPx more.
+constexpr int kMaxFootprintSide = 8;
+constexpr double kParallaxMarginPx = 1.0;
+
+PixelSample Footprint(const Photo& photo, const Eigen::Vector2d& px, const Eigen::Matrix2d& j,
+                      const Grid<uint32_t>* owner = nullptr, uint32_t texel = kNoTexel) {
   const double det = j.determinant();
   if (!(std::abs(det) > 1e-12) || !std::isfinite(det)) return Bilinear(photo, px.x(), px.y());
   const Eigen::Matrix2d inv = j.inverse();
-  const double ex = 0.5 * (std::abs(j(0, 0)) + std::abs(j(0, 1)));
-  const double ey = 0.5 * (std::abs(j(1, 0)) + std::abs(j(1, 1)));
+  const double margin = owner ? kParallaxMarginPx : 0.0;
+  const double ex = 0.5 * (std::abs(j(0, 0)) + std::abs(j(0, 1))) + margin;
+  const double ey = 0.5 * (std::abs(j(1, 0)) + std::abs(j(1, 1))) + margin;
   const int w = photo.rgb.width, h = photo.rgb.height;
   const int x0 = std::max(0, static_cast<int>(std::ceil(px.x() - ex)));
   const int x1 = std::min(w - 1, static_cast<int>(std::floor(px.x() + ex)));
@@ -79,21 +92,88 @@ PixelSample Footprint(const Photo& photo, const Eigen::Vector2d& px, const Eigen
   const int y1 = std::min(h - 1, static_cast<int>(std::floor(px.y() + ey)));
   const int step = 1 + std::max(x1 - x0, y1 - y0) / kMaxFootprintSide;
   PixelSample s;
-  int n = 0;
+  int n = 0, in_cell = 0;
   for (int y = y0; y <= y1; y += step)
     for (int x = x0; x <= x1; x += step) {
       const Eigen::Vector2d o = inv * Eigen::Vector2d(x - px.x(), y - px.y());
-      if (!(o.x() >= -0.5 && o.x() < 0.5 && o.y() >= -0.5 && o.y() < 0.5)) continue;
+      const bool inside = o.x() >= -0.5 && o.x() < 0.5 && o.y() >= -0.5 && o.y() < 0.5;
+      in_cell += inside;
+      if (owner ? (*owner)(x, y) != texel : !inside) continue;
       s.rgb += photo.rgb(x, y);
       if (!photo.flags.empty()) s.flags |= photo.flags(x, y);
       ++n;
     }
-  if (n == 0) return Bilinear(photo, px.x(), px.y());
+  if (n == 0) {
+    // No pixel sees the texel. Its own cell's pixels see another texel or the frame (hidden), or
+    // the photo has a pixel per texel or more yet its pixel centres step over this one (an
+    // oblique view or parallax narrows it): the bilinear value there would be its neighbours'
+    // paint. Only a photo coarser than the grid falls back to the bilinear value.
+    if (owner && (in_cell > 0 || std::abs(det) >= 1.0)) {
+      s.hidden = true;
+      return s;
+    }
+    return Bilinear(photo, px.x(), px.y());
+  }
   s.rgb /= static_cast<float>(n);
+  s.seen = owner != nullptr;
   return s;
 }
 
 }  // namespace
+
+PixelTexelMaps MapPixelsToTexels(const PhotoSet& photos, const HeightField& canvas,
+                                 const RigidTransform& canvas_from_scan,
+                                 const HeightFieldTracer& tracer) {
+  PixelTexelMaps out;
+  std::vector<const Camera*> views;
+  for (const Photo& photo : photos.photos) {
+    size_t k = 0;
+    while (k < views.size() && !views[k]->SameView(photo.camera)) ++k;
+    if (k == views.size()) views.push_back(&photo.camera);
+    out.of_photo.push_back(static_cast<uint32_t>(k));
+  }
+  const int w = canvas.width(), h = canvas.height();
+  const Mat3d& rotation = canvas_from_scan.rotation;
+  // Descending rays start 1 mm above the highest relief (or frame top): their hits then carry
+  // the rounding of short rays, not of a ~1000 mm camera distance.
+  const double start_z =
+      std::max<double>(tracer.max_height_mm(), canvas.frame.max_raise_mm()) + 1.0;
+  for (const Camera* camera : views) {
+    Grid<uint32_t> map(camera->width, camera->height, kNoTexel);
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, camera->height, 8), [&](const tbb::blocked_range<int>& rows) {
+          const int n = camera->width;
+          std::vector<Vec3f> origins(n), directions(n);
+          std::vector<SurfaceHit> hits(n);
+          TraceOptions trace;
+          trace.num_threads = 1;  // rows are the parallel unit
+          for (int v = rows.begin(); v < rows.end(); ++v) {
+            for (int u = 0; u < n; ++u) {
+              Vec3d o, d;
+              camera->Ray(u, v, o, d);
+              o = canvas_from_scan.Apply(o);
+              d = (rotation * d).normalized();
+              if (d.z() < 0 && o.z() > start_z) o += ((o.z() - start_z) / -d.z()) * d;
+              origins[u] = o.cast<float>();
+              directions[u] = d.cast<float>();
+            }
+            tracer.Intersect(origins, directions, hits, trace);
+            uint32_t* row = map.Row(v);
+            for (int u = 0; u < n; ++u) {
+              if (!hits[u].hit) continue;
+              const int x = std::clamp(static_cast<int>(std::lround(hits[u].texel_x)), 0, w - 1);
+              const int y = std::clamp(static_cast<int>(std::lround(hits[u].texel_y)), 0, h - 1);
+              if (canvas.state(x, y) == TexelState::kOutside) continue;
+              row[u] =
+                  static_cast<uint32_t>(y) * static_cast<uint32_t>(w) + static_cast<uint32_t>(x);
+            }
+          }
+        });
+    out.rays += static_cast<size_t>(camera->width) * static_cast<size_t>(camera->height);
+    out.maps.push_back(std::move(map));
+  }
+  return out;
+}
 
 Status SampleOptions::Validate() const {
   if (!(std::isfinite(min_cos) && min_cos >= 0 && min_cos < 1))
@@ -172,6 +252,16 @@ Status ValidateSampleScene(const SampleScene& scene) {
                    "x" + std::to_string(p.rgb.height) + ", its camera " +
                    std::to_string(p.camera.width) + "x" + std::to_string(p.camera.height)};
   }
+  if (const PixelTexelMaps* m = scene.pixel_texels) {
+    DIGITIZE_CHECK(m->of_photo.size() == scene.photos->photos.size(),
+                   "pixel maps for another photo set");
+    for (size_t i = 0; i < m->of_photo.size(); ++i) {
+      const Camera& c = scene.photos->photos[i].camera;
+      DIGITIZE_CHECK(m->of_photo[i] < m->maps.size() && m->maps[m->of_photo[i]].width == c.width &&
+                         m->maps[m->of_photo[i]].height == c.height,
+                     "pixel map of photo " + std::to_string(i) + " does not fit its camera");
+    }
+  }
   return CheckCamerasSeeCanvas(*scene.photos, scene.canvas_from_scan, canvas);
 }
 
@@ -224,9 +314,12 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     const Light& light = photo.light;
     const bool pinhole = camera.model == CameraModel::kPinhole;
     const Vec3d camera_centre_scan = camera.CentreInScan();
+    const Grid<uint32_t>* owner =
+        scene.pixel_texels ? &scene.pixel_texels->maps[scene.pixel_texels->of_photo[i]] : nullptr;
     SampleStats local;
     local.candidates = n_texels;
     std::vector<uint32_t> candidate;  // texel index t of samples waiting for rays
+    std::vector<uint8_t> seen;        // the pixel map says it is visible: no view ray
     std::vector<Vec3f> origins, view_dirs, light_dirs;
     std::vector<float> view_far, light_far;
     candidate.reserve(n_texels);
@@ -256,7 +349,11 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       Eigen::Matrix2d jacobian;
       jacobian.col(0) = camera.Project(g.p_scan + texel_step_x) - px;
       jacobian.col(1) = camera.Project(g.p_scan + texel_step_y) - px;
-      const PixelSample pixel = Footprint(photo, px, jacobian);
+      const PixelSample pixel = Footprint(photo, px, jacobian, owner, texels[t]);
+      if (pixel.hidden) {
+        ++local.hidden;
+        continue;
+      }
       if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
         ++local.non_finite;
         continue;
@@ -275,6 +372,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       s.radiance = pixel.rgb;
       s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
       candidate.push_back(static_cast<uint32_t>(t));
+      seen.push_back(pixel.seen);
       origins.push_back(g.p_canvas.cast<float>());
       view_dirs.push_back(v_canvas.cast<float>());
       light_dirs.push_back(l_canvas.cast<float>());
@@ -285,8 +383,23 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
                               : std::numeric_limits<float>::infinity());
     }
     std::vector<uint8_t> hidden(candidate.size(), 0), shadowed(candidate.size(), 0);
-    if (options.visibility_rays)
-      scene.tracer->Occluded(origins, view_dirs, view_far, hidden, options.trace, &local.view_rays);
+    if (options.visibility_rays) {
+      // Only the candidates no pixel map vouches for (all of them without maps).
+      std::vector<Vec3f> ray_origins, ray_dirs;
+      std::vector<float> ray_far;
+      std::vector<uint32_t> ray_of;
+      for (size_t c = 0; c < candidate.size(); ++c) {
+        if (seen[c]) continue;
+        ray_origins.push_back(origins[c]);
+        ray_dirs.push_back(view_dirs[c]);
+        ray_far.push_back(view_far[c]);
+        ray_of.push_back(static_cast<uint32_t>(c));
+      }
+      std::vector<uint8_t> blocked(ray_of.size(), 0);
+      scene.tracer->Occluded(ray_origins, ray_dirs, ray_far, blocked, options.trace,
+                             &local.view_rays);
+      for (size_t j = 0; j < ray_of.size(); ++j) hidden[ray_of[j]] = blocked[j];
+    }
     if (options.shadow_rays) {
       // Only the visible candidates need a shadow ray: compact them first.
       size_t m = 0;

@@ -46,22 +46,6 @@ Vec3d BilinearNormal(const Grid<Vec3f>& normals, double tx, double ty) {
   return n / len;
 }
 
-// A camera ray through the centre of pixel (u, v), scan frame.
-void CameraRay(const Camera& camera, int u, int v, Vec3d& origin, Vec3d& direction) {
-  const Mat3d scan_from_camera = camera.camera_from_scan.rotation.transpose();
-  const Vec3d& t = camera.camera_from_scan.translation;
-  if (camera.model == CameraModel::kOrthographic) {
-    const Vec3d p((u - camera.cx) * camera.pixel_pitch_mm, (v - camera.cy) * camera.pixel_pitch_mm,
-                  0.0);
-    origin = scan_from_camera * (p - t);
-    direction = scan_from_camera.col(2);
-    return;
-  }
-  origin = camera.CentreInScan();
-  direction = scan_from_camera *
-              Vec3d((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0).normalized();
-}
-
 }  // namespace
 
 Status RelightOptions::Validate() const {
@@ -120,7 +104,7 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
     for (int v = rows.begin(); v < rows.end(); ++v) {
       for (int u = 0; u < n; ++u) {
         Vec3d o, d;
-        CameraRay(camera, u, v, o, d);
+        camera.Ray(u, v, o, d);
         o = canvas_from_scan.Apply(o);
         d = (canvas_rotation * d).normalized();
         // Start descending rays just above the relief: a hit point then carries the float

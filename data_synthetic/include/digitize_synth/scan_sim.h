@@ -28,6 +28,9 @@ struct FrameOptions {
   // canvas plane up to raise_mm. 0 = no lip.
   double lip_mm = 0, lip_gap_mm = 8;
   double Width(int side) const;  // side: 0 left, 1 right, 2 bottom, 3 top
+  // The frame as the library's ray tests model it (height_field.h): the truth a canvas measured
+  // from a scan of this frame should carry. None when disabled.
+  FrameBoxes Boxes() const;
   Status Validate() const;
   // Validate() and, for a canvas of this size, a lip that leaves some of it in view.
   Status ValidateFor(double canvas_width_mm, double canvas_height_mm) const;

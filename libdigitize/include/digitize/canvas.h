@@ -6,7 +6,8 @@
 // (impasto walls, holes) filled -> boundary refined by a height-step test -> eroded copy used
 // for a second, robust plane fit on the canvas points alone (relief trimmed) -> outline: the
 // visible canvas as a rectangle in the plane (in-plane axes from its edges, mask = the pixels
-// inside it, frame overhangs detected) -> frame.
+// inside it, frame overhangs detected) -> canvas frame -> the frame's boxes (height_field.h): per
+// side, from the scan points outside the outline.
 #pragma once
 
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "digitize/core.h"
+#include "digitize/height_field.h"
 #include "digitize/scan.h"
 
 namespace digitize {
@@ -53,7 +55,11 @@ struct CanvasResult {
   bool outline_fitted = false;
   std::string outline_note;
   std::vector<std::string> hidden_edges;  // "left", "right", "top", "bottom": the frame overhangs
-  std::vector<std::string> warnings;      // one line each, for the report and the console
+  // The frame as boxes the ray tests see (canvas_frame.cpp): per side, the top of the scan points
+  // within 150 mm outside the outline; none on a side the scan does not cover or where nothing
+  // rises above the canvas plane (a canvas on a wall, an unframed stretcher).
+  FrameBoxes frame;
+  std::vector<std::string> warnings;  // one line each, for the report and the console
 };
 
 // Errors (naming scan.source): too few valid samples, no valid sample near the seed, or a

@@ -10,6 +10,7 @@
 // pitch_mm.
 #pragma once
 
+#include <array>
 #include <cstdint>
 
 #include "digitize/core.h"
@@ -28,10 +29,46 @@ inline bool HasHeight(TexelState s) {
   return s == TexelState::kMeasured || s == TexelState::kFilled;
 }
 
+inline constexpr std::array<const char*, 4> kFrameSideNames = {"left", "right", "bottom", "top"};
+
+// The frame around the canvas as the ray tests see it: one box per side, from gap_mm outside the
+// canvas outline outwards by width_mm, and from below the canvas plane up to raise_mm. A raised
+// moulding shadows the canvas edge under a grazing light and hides it from an oblique camera;
+// without it those photo pixels would be fitted as paint. Sides (canvas frame, W x H the grid's
+// extent): 0 left (X < 0), 1 right (X > W), 2 bottom (Y < 0), 3 top (Y > H). A side whose raise_mm
+// is <= 0 has no box. Measured from the scan by the canvas stage (canvas.h); all zero for an RTI
+// capture. A box is a plain step at the outline: a bevel or a lip is approximated by its top.
+struct FrameBoxes {
+  std::array<float, 4> raise_mm{};  // box top above the canvas plane, mm
+  std::array<float, 4> width_mm{};  // box width outwards, mm
+  std::array<float, 4> gap_mm{};    // from the canvas outline to the box, mm (> 0 where the frame
+                                    // hid a strip of canvas from the scanner)
+  bool any() const {
+    return std::any_of(raise_mm.begin(), raise_mm.end(), [](float r) { return r > 0.0f; });
+  }
+  float max_raise_mm() const {
+    return std::max(0.0f, *std::max_element(raise_mm.begin(), raise_mm.end()));
+  }
+  // Finite, raise_mm <= 1000, width_mm and gap_mm in [0, 1000] on every side (mm).
+  Status Validate() const {
+    for (int side = 0; side < 4; ++side) {
+      const float r = raise_mm[side], w = width_mm[side], g = gap_mm[side];
+      const auto in_range = [](float v) { return std::isfinite(v) && v >= 0.0f && v <= 1000.0f; };
+      if (!(std::isfinite(r) && r <= 1000.0f && in_range(w) && in_range(g)))
+        return Error{std::string("frame ") + kFrameSideNames[side] +
+                     ": raise_mm must be finite and <= 1000, width_mm and gap_mm in [0, 1000], "
+                     "got " +
+                     FormatNumber(r) + ", " + FormatNumber(w) + " and " + FormatNumber(g)};
+    }
+    return Status::Ok();
+  }
+};
+
 struct HeightField {
   Grid<float> height_mm;   // never NaN/Inf; 0 where kOutside
   Grid<TexelState> state;  // same size as height_mm
   double pitch_mm = 0.0;   // texel spacing along X and Y
+  FrameBoxes frame;        // none by default
 
   int width() const { return height_mm.width; }
   int height() const { return height_mm.height; }

@@ -15,6 +15,10 @@
 // above it). Built as Embree grid primitives (RTC_GEOMETRY_TYPE_GRID, pieces of <= 256 x 256
 // quads).
 //
+// FRAME. When the field carries frame boxes (HeightField::frame), they are a second Embree geometry
+// (a triangle mesh, 12 triangles per side): they block shadow and visibility rays like the
+// relief, and a camera ray (Intersect) that meets a box first reports `frame`, not a canvas hit.
+//
 // SKIPPING RAYS THAT CANNOT BE BLOCKED. A ray leaving a point at height h upwards (dz > 0) can only
 // hit relief higher than h, and only within the horizontal reach r = (H - h) / tan(elevation) where
 // H bounds the relief it can meet. Occluded() first bounds H with the global max height, then
@@ -25,6 +29,8 @@
 // height at tnear) is skipped (not blocked), and a traced ray gets tfar cut to its reach. A ray
 // whose footprint starts next to a vertex higher than itself cannot be skipped by any round and
 // is traced at once. Rays going down or level (dz <= 0) are always traced (with their own tfar).
+// With frame boxes, a ray the relief cannot block is still traced when its horizontal path leaves
+// the canvas rectangle below the highest box's top (up to where it rises above it).
 // The skip is exact (never skips a ray that Embree would report blocked, up to the epsilon
 // below), so results with and without skipping agree; `TraceOptions::skip_unblockable = false`
 // turns it off for benchmarks and tests. COST: Embree is fast on this geometry, and the rays
@@ -71,9 +77,10 @@ struct TraceStats {
 };
 
 struct SurfaceHit {
-  bool hit = false;
-  float t = 0;        // distance along the (unit) direction, mm
-  float texel_x = 0;  // continuous texel coordinates of the hit (texel centres at integers)
+  bool hit = false;    // the ray meets the canvas first
+  bool frame = false;  // the ray meets the field's frame boxes first (hit is false)
+  float t = 0;         // distance along the (unit) direction, mm
+  float texel_x = 0;   // continuous texel coordinates of the hit (texel centres at integers)
   float texel_y = 0;
 };
 

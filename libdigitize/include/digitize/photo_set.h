@@ -95,6 +95,27 @@ struct Camera {
     return -(camera_from_scan.rotation.transpose() * camera_from_scan.translation);
   }
 
+  // The ray through the centre of pixel (u, v), scan frame: origin and unit direction (into the
+  // scene). Orthographic: from the pixel's place on the camera's plane, along its axis.
+  void Ray(double u, double v, Vec3d& origin, Vec3d& direction) const {
+    const Mat3d scan_from_camera = camera_from_scan.rotation.transpose();
+    if (model == CameraModel::kOrthographic) {
+      const Vec3d p((u - cx) * pixel_pitch_mm, (v - cy) * pixel_pitch_mm, 0.0);
+      origin = scan_from_camera * (p - camera_from_scan.translation);
+      direction = scan_from_camera.col(2);
+      return;
+    }
+    origin = CentreInScan();
+    direction = scan_from_camera * Vec3d((u - cx) / fx, (v - cy) / fy, 1.0).normalized();
+  }
+  // Same intrinsics and pose, exactly (photos of one camera position share what depends on it).
+  bool SameView(const Camera& o) const {
+    return model == o.model && width == o.width && height == o.height && fx == o.fx && fy == o.fy &&
+           cx == o.cx && cy == o.cy && pixel_pitch_mm == o.pixel_pitch_mm &&
+           camera_from_scan.rotation == o.camera_from_scan.rotation &&
+           camera_from_scan.translation == o.camera_from_scan.translation;
+  }
+
   // Unit direction from a scan-frame point towards the camera (the view direction v of the BRDF).
   Vec3d DirectionToCamera(const Vec3d& p_scan) const {
     if (model == CameraModel::kOrthographic) return -camera_from_scan.rotation.row(2).transpose();

@@ -8,8 +8,9 @@
 // fit them (brdf_fit.h, parallel over texels), write the maps; so memory stays ~tile_texels x
 // photos x 48 bytes whatever the canvas size.
 //
-// Unmodelled shadows. Shadows cast by anything but the relief (the frame under a grazing light, a
-// hand, a stand) are invisible to the ray tests, and dark samples pull the whole fit down. The
+// Unmodelled shadows. Shadows cast by anything but the relief and the frame's boxes (a frame the
+// canvas does not carry, a hand, a stand) are invisible to the ray tests, and dark samples pull
+// the whole fit down. The
 // model bounds radiance from below by the diffuse term (the lobe is >= 0), so, per texel:
 //   1. before fitting, the diffuse floor is estimated as the median apparent reflectance
 //      q = sum_c radiance / sum_c E of its samples (a lobe only raises q, a shadow drops it to ~0);
@@ -41,7 +42,11 @@ namespace digitize {
 struct ReflectanceFitOptions {
   SampleOptions samples;
   BrdfFitOptions fit;
-  int tile_texels = 32768;              // texels gathered and fitted at a time (memory bound)
+  int tile_texels = 32768;  // texels gathered and fitted at a time (memory bound)
+  // Sample each texel from the pixels whose camera rays see it (reflectance_samples.h,
+  // MapPixelsToTexels: one map per camera position, 4 bytes per pixel, held for the whole fit);
+  // false: from the pixels whose centres fall in its projected cell.
+  bool pixel_texel_maps = true;
   double dark_outlier_ratio = 0.5;      // before the fit, vs the median floor; <= 0 disables the
                                         // unmodelled-shadow removal (see above)
   double dark_outlier_fit_ratio = 0.7;  // after the fit, vs the fitted diffuse floor (a lit

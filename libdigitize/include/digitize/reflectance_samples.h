@@ -10,21 +10,28 @@
 //         in the scan frame (canvas_from_scan inverse), where cameras and lights live;
 //   n   = normals(x, y); directions go to its tangent frame (tangent_frame.h);
 //   v   = towards the camera (pinhole: the centre; orthographic: the axis), l = towards the light;
-//   rgb = the mean of the photo's pixels whose centres fall in the texel's footprint (its cell
-//         [-1/2, 1/2)^2 mapped by the projection's Jacobian at Camera::Project(p_scan)): the
-//         pixels whose nearest texel is this one, so a texel next to another paint is not fitted
-//         to a blend of both; texels smaller than a pixel take the bilinear value there;
+//   rgb = the mean of the photo's pixels that see this texel: with pixel maps (SampleScene::
+//         pixel_texels, MapPixelsToTexels) the pixels near the texel's footprint whose camera ray
+//         first meets the surface nearest to this texel (the renderers' image model, relief
+//         parallax and the frame included); without them the pixels whose centres fall in the
+//         footprint (the texel's cell [-1/2, 1/2)^2 mapped by the projection's Jacobian at
+//         Camera::Project(p_scan)). Either way a texel next to another paint is not fitted to a
+//         blend of both. Texels smaller than a pixel take the bilinear value at p;
 //   E   = Light::IrradianceAt(p_scan) * (n.l)   (what multiplies f_r; brdf_fit.h).
 // A candidate (texel, photo) is REJECTED, in this order (each counted in SampleStats):
 //   behind the camera; outside the image; n.v <= min_cos (texel faces away); n.l <= min_cos
 //   (light below the texel's horizon); a NaN/Inf pixel among those averaged; a saturated
 //   pixel among them (only a lower bound of the radiance); black (every channel <= black_level:
 //   clipped at the sensor's floor, so the value is only an upper bound); hidden from the camera
-//   (a ray from p towards the camera meets the relief); shadowed (a ray from p towards the light
-//   meets the relief). Rays are traced only for candidates that survive the cheaper tests, with
-//   the tracer's exact skipping of rays that cannot be blocked (counts in view_rays/light_rays).
-// Frame shadows are not visible to these tests (the canvas height field holds no frame): the fit
-// stage removes them as samples darker than the diffuse floor (reflectance_fit.h).
+//   (a ray from p towards the camera meets the relief or the frame); shadowed (a ray from p
+//   towards the light meets the relief or the frame). Rays are traced only for candidates that
+//   survive the cheaper tests, with the tracer's exact skipping of rays that cannot be blocked
+//   (counts in view_rays/light_rays).
+// The frame is in these tests when the canvas carries its boxes (HeightField::frame, measured
+// from the scan by the canvas stage). Without them (an RTI capture, a canvas from elsewhere),
+// frame shadows are removed by the fit stage as samples darker than the diffuse floor
+// (reflectance_fit.h), and the strip of canvas the frame hides from an oblique camera is fitted
+// from pixels of the frame.
 #pragma once
 
 #include <cstddef>
@@ -66,12 +73,27 @@ struct SampleStats {
 
 // What the samples are taken from. Everything must outlive the call; sizes are checked by
 // ValidateSampleScene, which FitReflectance calls (GatherSamples only asserts them).
+// Which texel every pixel of a photo sees: the texel nearest to where the pixel's camera ray first
+// meets the canvas surface, kNoTexel where it meets the frame, a kOutside texel or nothing. One
+// map per camera position (Camera::SameView), shared by its photos: RTI domes and photo sets
+// with few camera positions trace it once per position, not per photo. 4 bytes per pixel.
+inline constexpr uint32_t kNoTexel = 0xFFFFFFFFu;
+struct PixelTexelMaps {
+  std::vector<Grid<uint32_t>> maps;  // texel index y * width + x per pixel
+  std::vector<uint32_t> of_photo;    // map index per photo of the set
+  size_t rays = 0;                   // camera rays traced
+};
+PixelTexelMaps MapPixelsToTexels(const PhotoSet& photos, const HeightField& canvas,
+                                 const RigidTransform& canvas_from_scan,
+                                 const HeightFieldTracer& tracer);
+
 struct SampleScene {
   const HeightField* canvas = nullptr;
   const Grid<Vec3f>* normals = nullptr;  // unit, canvas frame, canvas size
   RigidTransform canvas_from_scan;
-  const PhotoSet* photos = nullptr;           // pixels loaded
-  const HeightFieldTracer* tracer = nullptr;  // built from *canvas
+  const PhotoSet* photos = nullptr;              // pixels loaded
+  const HeightFieldTracer* tracer = nullptr;     // built from *canvas
+  const PixelTexelMaps* pixel_texels = nullptr;  // null: the footprint rule (see above)
 };
 
 // Input errors: sizes differ, photos not loaded, a camera that does not see the canvas or sits
