@@ -119,8 +119,9 @@ TEST(ReflectanceSamples, FlatCanvasSamplesAreExact) {
 // camera tilted 40 degrees about the canvas Y axis over a flat canvas, its pixels 1.1 texels apart
 // along X on the canvas (0.84 along Y, so 1.08 pixels per texel of area): every pixel's texel is
 // the one nearest to where its ray meets the plane; photos of the one camera share one map; a
-// texel whose column the pixels step over has no sample in the photo (with the map), where
-// without it the bilinear value blends its neighbours.
+// texel whose column the pixels step over gets only the bilinear value, its neighbours' paint,
+// which is dropped where the texel has min_direct_samples others (0 here: always) and kept where
+// it would have too few (the default 8 against these 2 photos).
 TEST(ReflectanceSamples, PixelMapsSeeWhatTheRaysSee) {
   const int w = 40, h = 30;
   const HeightField canvas = FlatCanvas(w, h);
@@ -181,24 +182,34 @@ TEST(ReflectanceSamples, PixelMapsSeeWhatTheRaysSee) {
   }
   ASSERT_GT(unseen, 0) << "pixels 1.1 texels apart must step over some column";
   const Grid<Vec3f> normals = UpNormals(canvas);
-  for (bool with_maps : {true, false}) {
-    const SampleScene scene{&canvas, &normals, RigidTransform{},
-                            &set,    &*tracer, with_maps ? &maps : nullptr};
-    BrdfSamples samples;
-    SampleStats stats;
-    GatherSamples(scene, texels, {}, samples, stats);
-    int blended = 0;
-    for (size_t k = 0; k < texels.size(); ++k) {
-      const int x = static_cast<int>(texels[k] % w);
-      for (const BrdfSample& s : samples.Texel(k)) {
-        if (with_maps)
-          EXPECT_FLOAT_EQ(s.radiance.x(), static_cast<float>(x)) << "texel column " << x;
-        blended += s.radiance.x() != static_cast<float>(x);
+  for (int min_direct : {0, 8}) {
+    for (bool with_maps : {true, false}) {
+      const SampleScene scene{&canvas, &normals, RigidTransform{},
+                              &set,    &*tracer, with_maps ? &maps : nullptr};
+      BrdfSamples samples;
+      SampleStats stats;
+      SampleOptions options;
+      options.min_direct_samples = min_direct;
+      GatherSamples(scene, texels, options, samples, stats);
+      int blended = 0;
+      for (size_t k = 0; k < texels.size(); ++k) {
+        const int x = static_cast<int>(texels[k] % w);
+        for (const BrdfSample& s : samples.Texel(k)) {
+          if (with_maps && pixels_of_column[x])
+            EXPECT_FLOAT_EQ(s.radiance.x(), static_cast<float>(x)) << "texel column " << x;
+          blended += s.radiance.x() != static_cast<float>(x);
+        }
+        const bool dropped = with_maps && min_direct == 0 && !pixels_of_column[x];
+        EXPECT_EQ(samples.Texel(k).size(), dropped ? 0u : 2u) << x;
       }
-      if (with_maps) EXPECT_EQ(samples.Texel(k).size(), pixels_of_column[x] ? 2u : 0u) << x;
+      EXPECT_EQ(stats.hidden, 0u);
+      EXPECT_EQ(stats.stepped_over, with_maps && min_direct == 0 ? 2u * unseen : 0u);
+      EXPECT_EQ(stats.kept, 2 * texels.size() - stats.stepped_over);
+      if (!with_maps || min_direct > 0)
+        EXPECT_GE(blended, 2 * unseen) << "the bilinear fallback blends columns";
+      else
+        EXPECT_EQ(blended, 0);
     }
-    if (with_maps) EXPECT_EQ(stats.hidden, 2u * unseen);
-    if (!with_maps) EXPECT_GE(blended, 2 * unseen) << "the bilinear fallback blends columns";
   }
 }
 

@@ -15,6 +15,9 @@
 namespace digitize {
 namespace {
 
+// keep[] values of GatherSamples: not kept, kept, kept but interpolated.
+constexpr uint8_t kKeepDirect = 1, kKeepInterpolated = 2;
+
 std::string Count(size_t n) {
   char b[32];
   if (n >= 10'000'000)
@@ -31,8 +34,8 @@ std::string Count(size_t n) {
 struct PixelSample {
   Vec3f rgb = Vec3f::Zero();
   uint8_t flags = 0;
-  bool seen = false;    // pixels of a pixel map see the texel: it is visible, no ray needed
-  bool hidden = false;  // the footprint holds pixels, and none of them sees the texel
+  bool seen = false;          // pixels of a pixel map see the texel: visible, no ray needed
+  bool stepped_over = false;  // no pixel sees it: bilinear, marked (see Footprint)
 };
 
 PixelSample Bilinear(const Photo& photo, double u, double v) {
@@ -104,15 +107,15 @@ PixelSample Footprint(const Photo& photo, const Eigen::Vector2d& px, const Eigen
       ++n;
     }
   if (n == 0) {
-    // No pixel sees the texel. Its own cell's pixels see another texel or the frame (hidden), or
-    // the photo has a pixel per texel or more yet its pixel centres step over this one (an
-    // oblique view or parallax narrows it): the bilinear value there would be its neighbours'
-    // paint. Only a photo coarser than the grid falls back to the bilinear value.
-    if (owner && (in_cell > 0 || std::abs(det) >= 1.0)) {
-      s.hidden = true;
-      return s;
-    }
-    return Bilinear(photo, px.x(), px.y());
+    // No pixel sees the texel: its cell's pixels see a neighbour (relief parallax, a steep wall
+    // foreshortened to less than a pixel; or it is hidden, which the view ray decides), or no
+    // pixel centre falls in its cell although the photo resolves the grid (an oblique view steps
+    // over it). The bilinear value is then its neighbours' paint as much as its own: such a
+    // sample is marked, and dropped where the texel has enough others
+    // (SampleOptions::min_direct_samples). A photo coarser than the grid keeps it unmarked.
+    PixelSample b = Bilinear(photo, px.x(), px.y());
+    b.stepped_over = owner && (in_cell > 0 || std::abs(det) >= 1.0);
+    return b;
   }
   s.rgb /= static_cast<float>(n);
   s.seen = owner != nullptr;
@@ -180,6 +183,8 @@ Status SampleOptions::Validate() const {
     return Error{"min_cos must be in [0, 1), got " + FormatNumber(min_cos)};
   if (!(std::isfinite(black_level) && black_level >= 0 && black_level < 1))
     return Error{"black_level must be in [0, 1) (linear), got " + FormatNumber(black_level)};
+  if (min_direct_samples < 0)
+    return Error{"min_direct_samples must be >= 0, got " + std::to_string(min_direct_samples)};
   return Status::Ok();
 }
 
@@ -195,6 +200,7 @@ SampleStats& SampleStats::operator+=(const SampleStats& o) {
   black += o.black;
   hidden += o.hidden;
   shadowed += o.shadowed;
+  stepped_over += o.stepped_over;
   kept += o.kept;
   view_rays += o.view_rays;
   light_rays += o.light_rays;
@@ -214,7 +220,7 @@ std::string SampleStats::Brief() const {
         std::pair{facing_away, "facing away"},
         std::pair{light_below_horizon, "light below horizon"}, std::pair{non_finite, "NaN/Inf"},
         std::pair{saturated, "saturated"}, std::pair{black, "black"}, std::pair{hidden, "hidden"},
-        std::pair{shadowed, "shadowed"}}) {
+        std::pair{shadowed, "shadowed"}, std::pair{stepped_over, "stepped over"}}) {
     if (n == 0) continue;
     rejected += (rejected.empty() ? "" : ", ") + Count(n) + " " + what;
   }
@@ -318,8 +324,9 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
         scene.pixel_texels ? &scene.pixel_texels->maps[scene.pixel_texels->of_photo[i]] : nullptr;
     SampleStats local;
     local.candidates = n_texels;
-    std::vector<uint32_t> candidate;  // texel index t of samples waiting for rays
-    std::vector<uint8_t> seen;        // the pixel map says it is visible: no view ray
+    std::vector<uint32_t> candidate;    // texel index t of samples waiting for rays
+    std::vector<uint8_t> seen;          // the pixel map says it is visible: no view ray
+    std::vector<uint8_t> stepped_over;  // an interpolated sample (PixelSample::stepped_over)
     std::vector<Vec3f> origins, view_dirs, light_dirs;
     std::vector<float> view_far, light_far;
     candidate.reserve(n_texels);
@@ -350,10 +357,6 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       jacobian.col(0) = camera.Project(g.p_scan + texel_step_x) - px;
       jacobian.col(1) = camera.Project(g.p_scan + texel_step_y) - px;
       const PixelSample pixel = Footprint(photo, px, jacobian, owner, texels[t]);
-      if (pixel.hidden) {
-        ++local.hidden;
-        continue;
-      }
       if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
         ++local.non_finite;
         continue;
@@ -373,6 +376,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
       candidate.push_back(static_cast<uint32_t>(t));
       seen.push_back(pixel.seen);
+      stepped_over.push_back(pixel.stepped_over);
       origins.push_back(g.p_canvas.cast<float>());
       view_dirs.push_back(v_canvas.cast<float>());
       light_dirs.push_back(l_canvas.cast<float>());
@@ -423,7 +427,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       } else if (shadowed[c]) {
         ++local.shadowed;
       } else {
-        keep[i * n_texels + candidate[c]] = 1;
+        keep[i * n_texels + candidate[c]] = stepped_over[c] ? kKeepInterpolated : kKeepDirect;
         ++local.kept;
       }
     }
@@ -438,12 +442,26 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
 
   std::vector<BrdfSample> texel_samples;
   texel_samples.reserve(n_photos);
+  size_t dropped = 0;
   for (size_t t = 0; t < n_texels; ++t) {
     texel_samples.clear();
+    size_t direct = 0, interpolated = 0;
+    for (size_t i = 0; i < n_photos; ++i) {
+      direct += keep[i * n_texels + t] == kKeepDirect;
+      interpolated += keep[i * n_texels + t] == kKeepInterpolated;
+    }
+    // Interpolated samples only where the texel would otherwise have too few (a photo set from
+    // one camera position steps over the same texels in every photo).
+    const uint8_t least =
+        direct >= static_cast<size_t>(options.min_direct_samples) ? kKeepDirect : kKeepInterpolated;
+    if (least == kKeepDirect) dropped += interpolated;
     for (size_t i = 0; i < n_photos; ++i)
-      if (keep[i * n_texels + t]) texel_samples.push_back(slots[i * n_texels + t]);
+      if (keep[i * n_texels + t] && keep[i * n_texels + t] <= least)
+        texel_samples.push_back(slots[i * n_texels + t]);
     out.AddTexel(texel_samples);
   }
+  stats.stepped_over += dropped;
+  stats.kept -= dropped;
 }
 
 }  // namespace digitize

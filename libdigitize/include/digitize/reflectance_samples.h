@@ -16,7 +16,11 @@
 //         parallax and the frame included); without them the pixels whose centres fall in the
 //         footprint (the texel's cell [-1/2, 1/2)^2 mapped by the projection's Jacobian at
 //         Camera::Project(p_scan)). Either way a texel next to another paint is not fitted to a
-//         blend of both. Texels smaller than a pixel take the bilinear value at p;
+//         blend of both. Texels smaller than a pixel take the bilinear value at p; with pixel
+//         maps, where no pixel sees the texel although the photo resolves the grid (an oblique
+//         view steps over it, or a steep wall is foreshortened below a pixel and its pixels
+//         see a neighbour), that value is kept only where the texel has fewer than
+//         min_direct_samples others (counted as "stepped over" when dropped);
 //   E   = Light::IrradianceAt(p_scan) * (n.l)   (what multiplies f_r; brdf_fit.h).
 // A candidate (texel, photo) is REJECTED, in this order (each counted in SampleStats):
 //   behind the camera; outside the image; n.v <= min_cos (texel faces away); n.l <= min_cos
@@ -54,7 +58,12 @@ struct SampleOptions {
   bool reject_black = true;     // drop samples black in every channel (clipped at the floor)
   bool visibility_rays = true;  // trace rays towards the camera (hidden texels)
   bool shadow_rays = true;      // trace rays towards the light (self-shadowing)
-  TraceOptions trace;           // skip_unblockable etc.
+  // With pixel maps, a texel no pixel sees in a photo that resolves the grid (stepped over by an
+  // oblique view, a wall foreshortened below a pixel) gets the bilinear value, its neighbours'
+  // paint as much as its own; such samples are dropped from a texel with at least this many
+  // direct ones.
+  int min_direct_samples = 8;
+  TraceOptions trace;  // skip_unblockable etc.
   Status Validate() const;
 };
 
@@ -63,6 +72,7 @@ struct SampleStats {
   size_t candidates = 0;  // texels x photos
   size_t behind_camera = 0, outside_image = 0, facing_away = 0, light_below_horizon = 0;
   size_t non_finite = 0, saturated = 0, black = 0, hidden = 0, shadowed = 0;
+  size_t stepped_over = 0;  // interpolated samples dropped: the texel had enough direct ones
   size_t kept = 0;
   TraceStats view_rays, light_rays;
   SampleStats& operator+=(const SampleStats& o);
