@@ -114,7 +114,6 @@ struct HeightFieldTracer::Impl {
   int width = 0, height = 0;
   double pitch_mm = 0, inv_pitch_mm = 0;
   float max_height_mm = 0;
-  FrameBoxes frame;          // the field's frame boxes (none: frame_geometry is invalid)
   float frame_raise_mm = 0;  // highest side's raise
   unsigned frame_geometry = RTC_INVALID_GEOMETRY_ID;
   std::vector<float> vertices;  // x, y, z of (w + 2) x (h + 2) vertices, + 1 float for Embree's
@@ -307,18 +306,17 @@ HeightFieldTracer::~HeightFieldTracer() = default;
 // reach them, so a grazing ray cannot pass between two boxes. The boxes start one pitch below the
 // canvas plane: rays from the canvas start above it.
 Status HeightFieldTracer::Impl::AttachFrameBoxes(const FrameBoxes& frame) {
-  Impl& impl = *this;
   if (Status s = frame.Validate(); !s.ok()) return Error{"height-field tracer: " + s.message()};
-  const float W = static_cast<float>(impl.width * impl.pitch_mm);
-  const float H = static_cast<float>(impl.height * impl.pitch_mm);
-  const float z0 = static_cast<float>(-impl.pitch_mm);
+  const float W = static_cast<float>(width * pitch_mm);
+  const float H = static_cast<float>(height * pitch_mm);
+  const float z0 = static_cast<float>(-pitch_mm);
   const auto& w = frame.width_mm;
   struct Box {
     float x0, x1, y0, y1, z1;
   };
   std::vector<Box> boxes;
   // A side with a raise but no width still blocks: a thin wall of one pitch.
-  const float min_w = static_cast<float>(impl.pitch_mm);
+  const float min_w = static_cast<float>(pitch_mm);
   const auto width_of = [&](int side) { return std::max(w[side], min_w); };
   const auto& gap = frame.gap_mm;
   // Outer edges of the bottom and top boxes (Y), inner edges of the left and right ones (X).
@@ -332,12 +330,12 @@ Status HeightFieldTracer::Impl::AttachFrameBoxes(const FrameBoxes& frame) {
   if (r[2] > 0) boxes.push_back({x0, x1, y0, -gap[2], r[2]});
   if (r[3] > 0) boxes.push_back({x0, x1, H + gap[3], y1, r[3]});
 
-  RTCGeometry g = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
       g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), 8 * boxes.size()));
   auto* triangles = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
       g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), 12 * boxes.size()));
-  if (Status s = impl.EmbreeStatus("frame buffers"); !s.ok() || !vertices || !triangles) {
+  if (Status s = EmbreeStatus("frame buffers"); !s.ok() || !vertices || !triangles) {
     rtcReleaseGeometry(g);
     return Error{s.ok() ? "height-field tracer: frame buffer allocation failed" : s.message()};
   }
@@ -361,11 +359,10 @@ Status HeightFieldTracer::Impl::AttachFrameBoxes(const FrameBoxes& frame) {
     }
   }
   rtcCommitGeometry(g);
-  impl.frame_geometry = rtcAttachGeometry(impl.scene, g);
+  frame_geometry = rtcAttachGeometry(scene, g);
   rtcReleaseGeometry(g);
-  impl.frame = frame;
-  impl.frame_raise_mm = frame.max_raise_mm();
-  return impl.EmbreeStatus("frame geometry");
+  frame_raise_mm = frame.max_raise_mm();
+  return EmbreeStatus("frame geometry");
 }
 
 Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {

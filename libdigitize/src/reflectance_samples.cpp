@@ -10,6 +10,7 @@
 #include <mutex>
 #include <vector>
 
+#include "camera_rays.h"
 #include "digitize/tangent_frame.h"
 
 namespace digitize {
@@ -136,11 +137,7 @@ PixelTexelMaps MapPixelsToTexels(const PhotoSet& photos, const HeightField& canv
     out.of_photo.push_back(static_cast<uint32_t>(k));
   }
   const int w = canvas.width(), h = canvas.height();
-  const Mat3d& rotation = canvas_from_scan.rotation;
-  // Descending rays start 1 mm above the highest relief (or frame top): their hits then carry
-  // the rounding of short rays, not of a ~1000 mm camera distance.
-  const double start_z =
-      std::max<double>(tracer.max_height_mm(), canvas.frame.max_raise_mm()) + 1.0;
+  const double start_z = CameraRayStartZ(tracer, canvas);
   for (const Camera* camera : views) {
     Grid<uint32_t> map(camera->width, camera->height, kNoTexel);
     tbb::parallel_for(
@@ -151,15 +148,7 @@ PixelTexelMaps MapPixelsToTexels(const PhotoSet& photos, const HeightField& canv
           TraceOptions trace;
           trace.num_threads = 1;  // rows are the parallel unit
           for (int v = rows.begin(); v < rows.end(); ++v) {
-            for (int u = 0; u < n; ++u) {
-              Vec3d o, d;
-              camera->Ray(u, v, o, d);
-              o = canvas_from_scan.Apply(o);
-              d = (rotation * d).normalized();
-              if (d.z() < 0 && o.z() > start_z) o += ((o.z() - start_z) / -d.z()) * d;
-              origins[u] = o.cast<float>();
-              directions[u] = d.cast<float>();
-            }
+            CameraRowRays(*camera, canvas_from_scan, start_z, v, origins, directions);
             tracer.Intersect(origins, directions, hits, trace);
             uint32_t* row = map.Row(v);
             for (int u = 0; u < n; ++u) {

@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "camera_rays.h"
 #include "digitize/lafortune.h"
 #include "digitize/tangent_frame.h"
 
@@ -86,8 +87,7 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
   const bool point_light = light.type == LightType::kPoint;
   const Vec3d light_in_canvas = canvas_from_scan.Apply(light.position_mm);
   std::atomic<size_t> shadowed_total{0};
-  // 1 mm above the highest relief (canvas frame).
-  const double start_z = static_cast<double>(tracer.max_height_mm()) + 1.0;
+  const double start_z = CameraRayStartZ(tracer, canvas);
 
   auto render_rows = [&](const tbb::blocked_range<int>& rows) {
     const int n = camera.width;
@@ -102,18 +102,7 @@ RelitImage RenderRelit(const HeightFieldTracer& tracer, const HeightField& canva
     trace.num_threads = 1;  // rows are the parallel unit
     size_t shadowed = 0;
     for (int v = rows.begin(); v < rows.end(); ++v) {
-      for (int u = 0; u < n; ++u) {
-        Vec3d o, d;
-        camera.Ray(u, v, o, d);
-        o = canvas_from_scan.Apply(o);
-        d = (canvas_rotation * d).normalized();
-        // Start descending rays just above the relief: a hit point then carries the float
-        // rounding of its coordinates only, not of a ~1000 mm ray length (which is comparable
-        // to the shadow rays' origin offset).
-        if (d.z() < 0 && o.z() > start_z) o += ((o.z() - start_z) / -d.z()) * d;
-        origins[u] = o.cast<float>();
-        directions[u] = d.cast<float>();
-      }
+      CameraRowRays(camera, canvas_from_scan, start_z, v, origins, directions);
       tracer.Intersect(origins, directions, hits, trace);
       lit_pixel.clear();
       shadow_origins.clear();
