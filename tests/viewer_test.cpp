@@ -552,6 +552,83 @@ TEST(ViewerTest, GalleryHangsPaintingsFacingTheRoom) {
   EXPECT_GT(g.world_from_canvas[1].translation.x(), g.world_from_canvas[0].translation.x() + 400);
 }
 
+// The start view is a visitor's: ~2.5 m from the first painting at eye height, both paintings
+// (hung with their centres at 1.55 m) well inside the image, the floor in view; every painting
+// lies inside its picture light's full-strength cone, frame included.
+TEST(ViewerTest, GalleryStartViewShowsTheRoomAndTwoPaintings) {
+  const Gallery g = MakeGallery({Eigen::Vector2d(400, 300), Eigen::Vector2d(600, 800)});
+  ASSERT_EQ(g.centres_mm.size(), 2u);
+  ViewCamera c = g.start;
+  c.width = 1280;
+  c.height = 720;
+  const Camera cam = ToCamera(c);
+  EXPECT_NEAR((g.start.eye_mm - g.centres_mm[0]).norm(), 2500, 300);
+  EXPECT_NEAR(g.start.eye_mm.z(), 1600, 100);
+  for (const Vec3d& centre : g.centres_mm) {
+    EXPECT_NEAR(centre.z(), 1550, 1e-9);
+    ASSERT_TRUE(cam.InFront(centre));
+    const Eigen::Vector2d px = cam.Project(centre);
+    EXPECT_GT(px.x(), 0.1 * c.width);
+    EXPECT_LT(px.x(), 0.9 * c.width);
+    EXPECT_GT(px.y(), 0.1 * c.height);
+    EXPECT_LT(px.y(), 0.9 * c.height);
+  }
+  // The floor where it meets the back wall, somewhere across the image's lower edge.
+  bool floor_seen = false;
+  for (double x = 0; x <= g.width_mm && !floor_seen; x += 100) {
+    const Vec3d p(x, g.depth_mm - 20, 0);
+    if (!cam.InFront(p)) continue;
+    const Eigen::Vector2d px = cam.Project(p);
+    floor_seen = px.x() >= 0 && px.x() < c.width && px.y() >= 0 && px.y() < c.height;
+  }
+  EXPECT_TRUE(floor_seen) << "the start view shows no floor";
+  ASSERT_EQ(g.room.spots.size(), g.lights.size());
+  const double frame = GalleryOptions().frame_mm;
+  for (size_t i = 0; i < g.lights.size(); ++i) {
+    const RigidTransform& t = g.world_from_canvas[i];
+    const Eigen::Vector2d size = i == 0 ? Eigen::Vector2d(400, 300) : Eigen::Vector2d(600, 800);
+    for (double u : {-frame, size.x() + frame})
+      for (double v : {-frame, size.y() + frame}) {
+        const Vec3d corner = t.Apply(Vec3d(u, v, 0));
+        const Vec3d l = (corner - g.lights[i].position_mm).normalized();
+        const double deg = std::acos(std::clamp(l.dot(g.room.spots[i].axis), -1.0, 1.0)) * 180 /
+                           3.14159265358979323846;
+        EXPECT_LT(deg, g.room.spots[i].inner_deg) << "painting " << i << " corner outside its cone";
+      }
+  }
+  const ViewCamera near = CloseUpView(g, 0);
+  EXPECT_NEAR((near.eye_mm - g.centres_mm[0]).norm(), 350, 1);
+  EXPECT_TRUE(near.Validate().ok());
+}
+
+// The display transform: midtones (up to the knee) pass unchanged, highlights roll off below 1
+// monotonically and keep their hue; a gold highlight 4x paper white stays gold, not white.
+TEST(ViewerTest, DisplayColourKeepsMidtonesAndHueOfHighlights) {
+  EXPECT_LT((DisplayColour(Vec3f(0.5f, 0.3f, 0.2f)) - Vec3f(0.5f, 0.3f, 0.2f)).norm(), 1e-6);
+  EXPECT_LT((DisplayColour(Vec3f(0.25f, 0.15f, 0.1f), 2.0) - Vec3f(0.5f, 0.3f, 0.2f)).norm(), 1e-6);
+  double last = 0;
+  for (double v = 0.01; v < 100; v *= 1.1) {
+    const Vec3f d = DisplayColour(Vec3f::Constant(float(v)));
+    EXPECT_GE(d.x(), last - 1e-7) << v;
+    EXPECT_LE(d.x(), 1.0f) << v;
+    if (v < 2) {
+      EXPECT_LT(d.x(), 0.96f) << v;  // headroom: 2x paper white is far from clipped
+    }
+    last = d.x();
+  }
+  EXPECT_GT(last, 0.99);
+  EXPECT_NEAR(DisplayColour(Vec3f::Constant(1.0f)).x(), 0.875, 1e-6);  // paper white
+  const Vec3f gold(1.0f, 0.78f, 0.34f);
+  const Vec3f hi = DisplayColour(4.0f * gold);
+  EXPECT_LT(hi.maxCoeff(), 1.0f + 1e-6f);
+  EXPECT_NEAR(hi.z() / hi.x(), gold.z() / gold.x(), 1e-5) << "the highlight went white";
+  const Vec3f soft = DisplayColour(1.2f * gold);
+  EXPECT_NEAR(soft.y() / soft.x(), gold.y() / gold.x(), 1e-5);
+  EXPECT_NEAR(soft.z() / soft.x(), gold.z() / gold.x(), 1e-5);
+  for (float bad : {std::nanf(""), -1.0f, std::numeric_limits<float>::infinity()})
+    EXPECT_TRUE(DisplayColour(Vec3f::Constant(bad)).allFinite());
+}
+
 // The headless gallery screenshot (what `digitize demo` ends with) shows the painting.
 TEST(ViewerTest, GalleryScreenshotIsWritten) {
   REQUIRE_GL();

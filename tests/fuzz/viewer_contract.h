@@ -11,6 +11,7 @@
 // Returns "" when the contract holds, else what is broken.
 #pragma once
 
+#include <cmath>
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -58,8 +59,14 @@ inline std::string CheckViewerLoadFile(const std::filesystem::path& path) {
     if (!t.rotation.allFinite() || !t.translation.allFinite()) return "a placement is not finite";
   for (const Light& l : g.lights)
     if (!l.position_mm.allFinite() || !l.intensity.allFinite()) return "a light is not finite";
-  for (const viewer::SceneBox& b : g.boxes)
+  for (const viewer::SceneBox& b : g.room.boxes)
     if (!b.min_mm.allFinite() || !b.max_mm.allFinite()) return "a wall or frame is not finite";
+  for (const viewer::SpotCone& c : g.room.spots)
+    if (!c.axis.allFinite() || !std::isfinite(c.inner_deg) || !std::isfinite(c.outer_deg) ||
+        !(c.inner_deg < c.outer_deg))
+      return "a picture light's cone is not finite";
+  for (const Vec3d& c : g.centres_mm)
+    if (!c.allFinite()) return "a painting centre is not finite";
   return "";
 }
 

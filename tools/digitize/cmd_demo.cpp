@@ -342,13 +342,24 @@ int RunDemo(const DemoArgs& args) {
     // The demo ends in the gallery: the pack just written, read back as the viewer
     // reads it and hung in the virtual room, rendered headless (EGL surfaceless). No GL here is
     // a warning, not a failure: the digitization itself is done.
+    // The RTI capture's pack hangs beside it (after the RTI run below).
     const std::filesystem::path pack_path = dir / "painting.pack.exr";
     auto pack = viewer::LoadPackForViewer(pack_path);
-    gallery = pack.ok() ? viewer::RenderGalleryScreenshots(
-                              {{(out / "painting.pack.exr").string(), std::move(*pack)}},
-                              dir / "gallery.png")
-                        : Status(pack.error());
-    if (args.no_rti) return Status::Ok();
+    if (!pack.ok()) {
+      gallery = Status(pack.error());
+      return Status::Ok();
+    }
+    std::vector<std::pair<std::string, Pack>> hung = {
+        {(out / "painting.pack.exr").string(), std::move(*pack)}};
+    auto render_gallery = [&] {
+      viewer::GalleryShotOptions shot;
+      shot.close_up = dir / "gallery_closeup.png";
+      gallery = viewer::RenderGalleryScreenshots(hung, dir / "gallery.png", {}, shot);
+    };
+    if (args.no_rti) {
+      render_gallery();
+      return Status::Ok();
+    }
     // The RTI path: no scan, the canvas from the capture itself (a minute's work on a museum's
     // dome capture; seconds here). Its pack hangs in the gallery like the scanned one.
     {
@@ -362,8 +373,11 @@ int RunDemo(const DemoArgs& args) {
     auto rti_pack = viewer::LoadPackForViewer(dir / "rti.pack.exr");
     if (!rti_pack.ok()) {
       rti_gallery = Status(rti_pack.error());
+      render_gallery();
       return Status::Ok();
     }
+    hung.emplace_back((out / "rti.pack.exr").string(), *rti_pack);
+    render_gallery();
     // A 64 mm canvas is a speck from the room's start view: the paper's framed face view of it,
     // placed where the gallery hangs it, under the gallery's light.
     const Eigen::Vector2d size_mm(rti_pack->width() * rti_pack->field.pitch_mm,
@@ -432,9 +446,11 @@ int RunDemo(const DemoArgs& args) {
     const std::filesystem::path pack_path = out / "painting.pack.exr";
     if (gallery.ok())
       std::printf(
-          "gallery:  %s (%s in the virtual gallery, hybrid + adaptive; walk in it with "
-          "digitize-viewer %s)\n",
-          (out / "gallery.png").c_str(), pack_path.c_str(), pack_path.c_str());
+          "gallery:  %s and %s (%s%s in the virtual gallery, hybrid + adaptive; walk in it "
+          "with digitize-viewer %s%s)\n",
+          (out / "gallery.png").c_str(), (out / "gallery_closeup.png").c_str(), pack_path.c_str(),
+          rti ? " and the RTI pack" : "", pack_path.c_str(),
+          rti ? (" " + (out / "rti.pack.exr").string()).c_str() : "");
     else
       std::printf("gallery screenshot skipped: %s\n", gallery.message().c_str());
   }

@@ -3,7 +3,9 @@
 //
 //   digitize-viewer [PACK.pack.exr ...] [--synthetic] [--technique adaptive]
 //                   [--mode relit|light|specular|normals|raking]
-//                   [--screenshot shot.png [--camera-path path.json] [--size 1280x720]]
+//                   [--style realistic|watercolor|binary|collage|hatching]
+//                   [--screenshot shot.png [--camera-path path.json | --close-up near.png]
+//                    [--size 1280x720] [--exposure 1]]
 //
 // With a display: a GLFW window (OpenGL 4.5 core), walk with W/A/S/D (Q/E down/up, shift
 // faster), look by dragging with the right mouse button; in the light and specular modes the
@@ -93,7 +95,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   }
   for (const std::string& e : refused) std::fprintf(stderr, "digitize-viewer: %s\n", e.c_str());
   errors.insert(errors.end(), refused.begin(), refused.end());
-  (*renderer)->SetSceneBoxes(g.boxes);
+  (*renderer)->SetRoom(g.room);
   Walker walker;
   walker.eye = g.start.eye_mm;
   const Vec3d f0 = (g.start.target_mm - g.start.eye_mm).normalized();
@@ -106,6 +108,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   FrameStats stats;
   int technique = int(options.technique);
   int mode = int(options.mode);
+  int style = int(options.style);
   int frame = 0;
   bool shot_failed = false;  // --window-shot not written: exit 1
   float exposure_ambient = float(options.ambient);
@@ -176,6 +179,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
       cam.far_mm = 4 * (g.width_mm + g.depth_mm + g.height_mm);
       options.technique = Technique(technique);
       options.mode = ViewMode(mode);
+      options.style = Style(style);
       options.ambient = exposure_ambient;
       if (options.Validate().ok() && cam.Validate().ok()) {
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
@@ -204,6 +208,9 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     const char* modes[] = {"relit (gallery lights)", "light (drag: left button)",
                            "specular enhancement", "normals", "raking light"};
     ImGui::Combo("mode", &mode, modes, 5);
+    const char* styles[] = {"realistic", "watercolor (seed 003)", "binary, pen and ink (seed 003)",
+                            "collage (seed 003)", "hatching, tonal art maps (seed 004)"};
+    ImGui::Combo("style", &style, styles, 5);
     if (ViewMode(mode) == ViewMode::kLight || ViewMode(mode) == ViewMode::kSpecular) {
       const Vec3d& d = options.light_direction;
       ImGui::Text("light: azimuth %.0f deg, elevation %.0f deg",
@@ -302,7 +309,14 @@ int main(int argc, char** argv) {
                  "render headless into this image (.png, .jpg, .tif, .exr) and exit");
   app.add_option("--camera-path", camera_path, "JSON camera path: one screenshot per frame");
   app.add_option("--size", size, "screenshot size WxH");
-  std::string mode = "relit";
+  std::string mode = "relit", style = "realistic", close_up;
+  double exposure = 1.0;
+  app.add_option("--style", style,
+                 "look: realistic, or a stylised mode over room and paintings: watercolor, "
+                 "binary (pen and ink), collage, hatching (tonal art maps)");
+  app.add_option("--close-up", close_up,
+                 "with --screenshot: also a close view of the first painting, into this image");
+  app.add_option("--exposure", exposure, "screenshots: exposure before the tone curve");
   double light_azimuth = 135, light_elevation = 45, raking_azimuth = 180, raking_elevation = 10;
   app.add_option("--mode", mode,
                  "view mode: relit (the gallery's lights), light (a directional light: the left "
@@ -344,6 +358,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   options.mode = *m;
+  auto st = ParseStyle(style);
+  if (!st) {
+    std::fprintf(stderr, "digitize-viewer: %s\n", st.error().message.c_str());
+    return 1;
+  }
+  options.style = *st;
+  options.exposure = exposure;
   options.light_direction = LightDirectionFromAngles(light_azimuth, light_elevation);
   options.raking_azimuth_deg = raking_azimuth;
   options.raking_elevation_deg = raking_elevation;
@@ -399,6 +420,8 @@ int main(int argc, char** argv) {
   if (!screenshot.empty()) {
     GalleryShotOptions shot;
     shot.render = options;
+    shot.exposure = exposure;
+    shot.close_up = close_up;
     shot.inputs.assign(paths.begin(), paths.end());
     if (!camera_path.empty()) shot.inputs.emplace_back(camera_path);
     if (std::sscanf(size.c_str(), "%dx%d", &shot.width, &shot.height) != 2 || shot.width <= 0 ||

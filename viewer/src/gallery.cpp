@@ -87,6 +87,13 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     if (Status s = CheckOutputPath(out, options.inputs); !s.ok()) return s;
     outs.push_back(std::move(out));
   }
+  const bool close_up = path.empty() && !options.close_up.empty();
+  if (close_up) {
+    if (auto format = OutputFormatFor(options.close_up); !format.ok())
+      return Status(format.error());
+    if (Status s = CheckOutputPath(options.close_up, options.inputs); !s.ok()) return s;
+    outs.push_back(options.close_up);
+  }
   auto context = HeadlessContext::Create();
   if (!context) return context.error();
   auto renderer = Renderer::Create();
@@ -107,9 +114,11 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
       return Error{"none of the " + std::to_string(packs.size()) +
                    " painting(s) could be hung; nothing written"};
   }
-  (*renderer)->SetSceneBoxes(g.boxes);
+  (*renderer)->SetRoom(g.room);
   // As every other command: a missing output folder is made (only now, when all is ready).
-  if (const std::filesystem::path dir = out_png.parent_path(); !dir.empty()) {
+  for (const std::filesystem::path& out : outs) {
+    const std::filesystem::path dir = out.parent_path();
+    if (dir.empty()) continue;
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) return Error{dir.string() + ": cannot create the screenshot folder: " + ec.message()};
@@ -120,12 +129,20 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
     c.width = options.width;
     c.height = options.height;
     cameras.push_back(c);
+    if (close_up && !g.centres_mm.empty()) {
+      ViewCamera near = CloseUpView(g, 0);
+      near.width = options.width;
+      near.height = options.height;
+      cameras.push_back(near);
+    }
   }
   // Before anything is drawn: an image this GL cannot hold is an error, not an abort.
   for (const ViewCamera& c : cameras)
     if (Status s = (*renderer)->CheckImageSize(c.width, c.height); !s.ok()) return s;
+  RenderOptions render = options.render;
+  render.exposure = options.exposure;  // the styles' tone is the screenshot's
   for (size_t i = 0; i < cameras.size(); ++i) {
-    const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, options.render);
+    const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, render);
     if (Status s = WriteRgb8(outs[i], ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
   }
   return Status::Ok();

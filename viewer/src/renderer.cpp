@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "digitize_viewer/painting_setup.h"
+#include "digitize_viewer/tonal_art_map.h"
 #include "embedded_shaders.h"
 #include "height_mesh.h"
 
@@ -292,6 +293,11 @@ Status RenderOptions::Validate() const {
                  FormatNumber(bump_search_min_texels)};
   if (bump_binary_steps < 0 || bump_binary_steps > 32)
     return Error{"bump_binary_steps must be in [0, 32], got " + std::to_string(bump_binary_steps)};
+  if (!finite(exposure) || exposure <= 0 || !finite(style_tile_px) || style_tile_px <= 0 ||
+      !finite(hatching_tile_px) || hatching_tile_px <= 0)
+    return Error{"exposure, style_tile_px and hatching_tile_px must be > 0, got " +
+                 FormatNumber(exposure) + ", " + FormatNumber(style_tile_px) + ", " +
+                 FormatNumber(hatching_tile_px)};
   if (!finite(ambient) || ambient < 0)
     return Error{"ambient must be >= 0, got " + FormatNumber(ambient)};
   return Status::Ok();
@@ -299,12 +305,21 @@ Status RenderOptions::Validate() const {
 
 struct Renderer::Impl {
   GLuint plane_program = 0, box_program = 0, mesh_program = 0, scene_program = 0;
+  GLuint style_program = 0;
+  // The styles' inputs: the realistic render (colour + depth textures), made on first use, and
+  // their textures (the noise cube, the tonal art map), built on first use.
+  GLuint style_fbo = 0, style_colour = 0, style_depth = 0;
+  int style_w = 0, style_h = 0;
+  GLuint solid_texture = 0, tam_texture = 0;
+  std::vector<float> tam_ink;
   GLuint empty_vao = 0;
   GLuint cube_vbo = 0, edge_vbo = 0;
   GLuint box_vao = 0, box_instances = 0;      // relief boxes
   GLuint scene_vao = 0, scene_instances = 0;  // room
   GLuint edge_vao = 0, edge_instances = 0;    // box outlines
   size_t scene_count = 0;
+  std::vector<SpotCone> spots;
+  double room_ambient = 0;
   std::vector<Painting> paintings;
   // Offscreen target.
   GLuint fbo = 0, colour = 0, depth = 0;
@@ -319,8 +334,11 @@ struct Renderer::Impl {
         glDeleteBuffers(1, &p.mesh_ibo);
       }
     }
-    for (GLuint prog : {plane_program, box_program, mesh_program, scene_program})
+    for (GLuint prog : {plane_program, box_program, mesh_program, scene_program, style_program})
       if (prog) glDeleteProgram(prog);
+    const GLuint style_textures[] = {style_colour, style_depth, solid_texture, tam_texture};
+    glDeleteTextures(4, style_textures);
+    if (style_fbo) glDeleteFramebuffers(1, &style_fbo);
     const GLuint vaos[] = {empty_vao, box_vao, scene_vao, edge_vao};
     glDeleteVertexArrays(4, vaos);
     const GLuint bufs[] = {cube_vbo, edge_vbo, box_instances, scene_instances, edge_instances};
@@ -347,6 +365,67 @@ struct Renderer::Impl {
                    "viewer: the float framebuffer is incomplete");
     fbo_w = w;
     fbo_h = h;
+  }
+
+  void EnsureStyleTarget(int w, int h) {
+    if (style_fbo && style_w == w && style_h == h) return;
+    if (style_fbo) {
+      glDeleteFramebuffers(1, &style_fbo);
+      const GLuint t[] = {style_colour, style_depth};
+      glDeleteTextures(2, t);
+    }
+    glCreateFramebuffers(1, &style_fbo);
+    glCreateTextures(GL_TEXTURE_2D, 1, &style_colour);
+    glTextureStorage2D(style_colour, 1, GL_RGBA32F, w, h);
+    glCreateTextures(GL_TEXTURE_2D, 1, &style_depth);
+    glTextureStorage2D(style_depth, 1, GL_DEPTH_COMPONENT32F, w, h);
+    for (GLuint t : {style_colour, style_depth}) {
+      // Bilinear colour for the wobbled lookups; clamped so the edges repeat the border.
+      glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, t == style_colour ? GL_LINEAR : GL_NEAREST);
+      glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, t == style_colour ? GL_LINEAR : GL_NEAREST);
+      glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+      glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    }
+    glNamedFramebufferTexture(style_fbo, GL_COLOR_ATTACHMENT0, style_colour, 0);
+    glNamedFramebufferTexture(style_fbo, GL_DEPTH_ATTACHMENT, style_depth, 0);
+    DIGITIZE_CHECK(
+        glCheckNamedFramebufferStatus(style_fbo, GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE,
+        "viewer: the style pass's framebuffer is incomplete");
+    style_w = w;
+    style_h = h;
+  }
+  void EnsureStyleTextures(Style style) {
+    if (style != Style::kHatching && !solid_texture) {
+      const SolidTexture solid = BuildSolidTexture();
+      glCreateTextures(GL_TEXTURE_3D, 1, &solid_texture);
+      const int n = solid.size;
+      glTextureStorage3D(solid_texture, 1 + int(std::log2(n)), GL_RGBA8, n, n, n);
+      glTextureSubImage3D(solid_texture, 0, 0, 0, 0, n, n, n, GL_RGBA, GL_UNSIGNED_BYTE,
+                          solid.texels.data());
+      glGenerateTextureMipmap(solid_texture);
+      glTextureParameteri(solid_texture, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+      glTextureParameteri(solid_texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+      for (GLenum wrap : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+        glTextureParameteri(solid_texture, wrap, GL_REPEAT);
+    }
+    if (style == Style::kHatching && !tam_texture) {
+      const TonalArtMap tam = BuildTonalArtMap();
+      const int size = tam.At(0, 0).width;
+      glCreateTextures(GL_TEXTURE_2D_ARRAY, 1, &tam_texture);
+      glTextureStorage3D(tam_texture, tam.levels, GL_R32F, size, size, tam.tones);
+      for (int tone = 0; tone < tam.tones; ++tone)
+        for (int level = 0; level < tam.levels; ++level) {
+          const Grid<float>& g = tam.At(tone, level);
+          glTextureSubImage3D(tam_texture, level, 0, 0, tone, g.width, g.height, 1, GL_RED,
+                              GL_FLOAT, g.data.data());
+        }
+      // The map's own levels as the mip chain (not generated): what keeps the stroke width.
+      glTextureParameteri(tam_texture, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
+      glTextureParameteri(tam_texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+      glTextureParameteri(tam_texture, GL_TEXTURE_WRAP_S, GL_REPEAT);
+      glTextureParameteri(tam_texture, GL_TEXTURE_WRAP_T, GL_REPEAT);
+      tam_ink.assign(tam.target.begin(), tam.target.end());
+    }
   }
 
   // A VAO reading (corner, normal) per vertex from `vbo` and `instance_floats` floats per
@@ -412,6 +491,9 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
   auto scene = Link(shaders::kSceneVertex, shaders::kSceneFragment, "scene");
   if (!scene) return scene.error();
   m.scene_program = *scene;
+  auto style = Link(shaders::kStyleVertex, shaders::kStyleFragment, "style pass");
+  if (!style) return style.error();
+  m.style_program = *style;
 
   glCreateVertexArrays(1, &m.empty_vao);
   const std::vector<float> cube = CubeTriangles(), edges = CubeEdges();
@@ -423,7 +505,7 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
   glCreateBuffers(1, &m.scene_instances);
   glCreateBuffers(1, &m.edge_instances);
   m.box_vao = Impl::MakeInstancedVao(m.cube_vbo, m.box_instances, 1);
-  m.scene_vao = Impl::MakeInstancedVao(m.cube_vbo, m.scene_instances, 3);
+  m.scene_vao = Impl::MakeInstancedVao(m.cube_vbo, m.scene_instances, 4);
   m.edge_vao = Impl::MakeInstancedVao(m.edge_vbo, m.edge_instances, 3);
   if (GLenum e = glGetError(); e != GL_NO_ERROR)
     return Error{"viewer: OpenGL error " + std::to_string(e) + " while setting up"};
@@ -512,15 +594,17 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
   return int(impl_->paintings.size()) - 1;
 }
 
-void Renderer::SetSceneBoxes(const std::vector<SceneBox>& boxes) {
+void Renderer::SetRoom(const Room& room) {
   std::vector<float> data;
-  for (const SceneBox& b : boxes)
+  for (const SceneBox& b : room.boxes)
     data.insert(data.end(), {float(b.min_mm.x()), float(b.min_mm.y()), float(b.min_mm.z()),
                              float(b.max_mm.x()), float(b.max_mm.y()), float(b.max_mm.z()),
-                             b.albedo.x(), b.albedo.y(), b.albedo.z()});
+                             b.albedo.x(), b.albedo.y(), b.albedo.z(), float(int(b.surface))});
   glNamedBufferData(impl_->scene_instances, data.size() * sizeof(float), data.data(),
                     GL_STATIC_DRAW);
-  impl_->scene_count = boxes.size();
+  impl_->scene_count = room.boxes.size();
+  impl_->spots = room.spots;
+  impl_->room_ambient = room.ambient;
 }
 
 std::vector<float> Renderer::BoxAlphas(int index, const ViewCamera& camera,
@@ -568,6 +652,15 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
   const auto start = std::chrono::steady_clock::now();
   Impl& m = *impl_;
   FrameStats stats;
+  // A style draws the realistic frame into its own target first, then into the caller's.
+  const bool styled = options.style != Style::kRealistic;
+  GLint caller_fbo = 0;
+  if (styled) {
+    glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &caller_fbo);
+    m.EnsureStyleTarget(camera.width, camera.height);
+    m.EnsureStyleTextures(options.style);
+    glBindFramebuffer(GL_FRAMEBUFFER, m.style_fbo);
+  }
   glViewport(0, 0, camera.width, camera.height);
   glClearColor(0, 0, 0, 1);
   glClearDepth(1.0);
@@ -628,9 +721,23 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     set_mat(prog, "u_clip_from_model", clip_from_world);
     const Vec3f eye = camera.eye_mm.cast<float>();
     glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_eye"), 1, eye.data());
-    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_ambient"), float(options.ambient));
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_ambient"), float(m.room_ambient));
     glProgramUniform1i(prog, glGetUniformLocation(prog, "u_flat"), 0);
     set_lights(prog, scene_lights, RigidTransform{}, /*points_only=*/true);
+    // Each point light's cone (SpotCone), in the order set_lights kept them.
+    int n = 0;
+    for (size_t i = 0; i < scene_lights.size(); ++i) {
+      if (scene_lights[i].type == LightType::kDirectional) continue;
+      SpotCone cone;
+      if (i < m.spots.size()) cone = m.spots[i];
+      const Vec3f axis = cone.axis.normalized().cast<float>();
+      const std::string idx = "[" + std::to_string(n++) + "]";
+      glProgramUniform4f(prog, glGetUniformLocation(prog, ("u_spot" + idx).c_str()), axis.x(),
+                         axis.y(), axis.z(), 0.0f);
+      glProgramUniform2f(prog, glGetUniformLocation(prog, ("u_spot_cos" + idx).c_str()),
+                         float(std::cos(std::min(cone.inner_deg, 180.0) * kPi / 180)),
+                         float(std::cos(std::min(cone.outer_deg, 180.0) * kPi / 180)));
+    }
     glBindVertexArray(m.scene_vao);
     glDrawArraysInstanced(GL_TRIANGLES, 0, 36, GLsizei(m.scene_count));
   }
@@ -774,6 +881,40 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glDrawArraysInstanced(GL_LINES, 0, 24, GLsizei(outline.size() / 9));
     }
   }
+  if (styled) {
+    glBindFramebuffer(GL_FRAMEBUFFER, GLuint(caller_fbo));
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_BLEND);
+    glDisable(GL_CULL_FACE);
+    const GLuint prog = m.style_program;
+    glUseProgram(prog);
+    set_mat(prog, "u_world_from_clip", clip_from_world.inverse());
+    const Vec3f eye = camera.eye_mm.cast<float>();
+    const Vec3f fwd = (camera.target_mm - camera.eye_mm).normalized().cast<float>();
+    glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_eye"), 1, eye.data());
+    glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_forward"), 1, fwd.data());
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_exposure"), float(options.exposure));
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_knee"), float(kToneKnee));
+    // Octave 1's cube spans style_tile_px on screen at z = 2^floor(log2 z): f_px u_tile = tile.
+    const double f_px = 0.5 * camera.height / std::tan(0.5 * camera.fov_y_deg * kPi / 180);
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_tile"),
+                       float(options.style_tile_px / f_px));
+    glProgramUniform1f(prog, glGetUniformLocation(prog, "u_tam_tile"),
+                       float(options.hatching_tile_px / f_px));
+    if (!m.tam_ink.empty())
+      glProgramUniform1fv(prog, glGetUniformLocation(prog, "u_tam_ink"), GLsizei(m.tam_ink.size()),
+                          m.tam_ink.data());
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_style"), int(options.style));
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_debug"),
+                       options.style_debug_texture ? 1 : 0);
+    glBindTextureUnit(0, m.style_colour);
+    glBindTextureUnit(1, m.style_depth);
+    glBindTextureUnit(2, m.solid_texture);
+    glBindTextureUnit(3, m.tam_texture);
+    glBindVertexArray(m.empty_vao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glEnable(GL_DEPTH_TEST);
+  }
   glBindVertexArray(0);
   stats.cpu_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -814,14 +955,25 @@ RenderedImage Renderer::Render(const ViewCamera& camera, const std::vector<Light
   return out;
 }
 
+Vec3f DisplayColour(const Vec3f& linear, double exposure) {
+  Vec3d c = linear.cast<double>() * exposure;
+  for (int k = 0; k < 3; ++k)
+    if (!std::isfinite(c[k]) || c[k] < 0) c[k] = 0;
+  const double top = c.maxCoeff(), knee = kToneKnee;
+  if (top > knee) {
+    const double x = (top - knee) / (1 - knee);
+    c *= (knee + (1 - knee) * x / (1 + x)) / top;
+  }
+  return c.cwiseMax(0.0).cwiseMin(1.0).cast<float>();
+}
+
 Grid<std::array<uint8_t, 3>> ToneMap(const Grid<Vec3f>& rgb, double exposure) {
   Grid<std::array<uint8_t, 3>> out(rgb.width, rgb.height);
   for (size_t i = 0; i < rgb.data.size(); ++i) {
+    const Vec3f d = DisplayColour(rgb.data[i], exposure);
     for (int c = 0; c < 3; ++c) {
-      double v = std::clamp(double(rgb.data[i][c]) * exposure, 0.0, 1.0);
-      if (!std::isfinite(v)) v = 0;
-      v = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
-      out.data[i][c] = uint8_t(std::lround(v * 255));
+      const double v = d[c] <= 0.0031308 ? 12.92 * d[c] : 1.055 * std::pow(d[c], 1 / 2.4) - 0.055;
+      out.data[i][c] = uint8_t(std::lround(std::clamp(v, 0.0, 1.0) * 255));
     }
   }
   return out;

@@ -1,7 +1,8 @@
-// The virtual gallery: a room (floor, walls, ceiling), packs hung in frames at their physical
-// size on the back wall, point lights in front of them, a starting camera; scripted camera paths
-// (JSON) for screenshots; loading packs for the viewer with errors reported, never thrown; the
-// headless gallery screenshot `digitize demo` ends with.
+// The virtual gallery: a room (floorboards, walls, ceiling, skirting, a lighting track), packs
+// hung along the back wall at their physical size in moulded frames, a picture light (a spot on
+// the track) per painting, a starting camera; scripted camera paths (JSON) for screenshots;
+// loading packs for the viewer with errors reported, never thrown; the headless gallery
+// screenshots `digitize demo` ends with.
 //
 // Layer: viewer (libdigitize only). Frames: the gallery's world frame is in mm with Z UP, the
 // floor at Z = 0, the back wall at Y = room depth; a canvas hangs with its X along world +X, its
@@ -24,18 +25,21 @@ struct GalleryOptions {
   double min_room_width_mm = 6000;  // grown to fit the paintings
   double room_depth_mm = 6000;
   double room_height_mm = 3200;
-  double centre_height_mm = 1500;   // canvas centres hang at this height
+  double centre_height_mm = 1550;   // canvas centres hang at eye height (museum practice)
   double gap_mm = 1200;             // between frames, and from the side walls
-  double frame_mm = 60;             // frame moulding width
-  double light_distance_mm = 1500;  // each painting's light: this far in front, 30 deg above
+  double frame_mm = 70;             // frame moulding width
+  double light_distance_mm = 1500;  // each picture light: this far in front, 30 deg above
+  double view_distance_mm = 2500;   // the start camera from the first painting
   Status Validate() const;          // every length > 0
 };
 
 struct Gallery {
-  std::vector<SceneBox> boxes;                    // room and frames
+  Room room;                                      // boxes, the picture lights' cones, ambient
   std::vector<RigidTransform> world_from_canvas;  // one per painting, in the given order
-  std::vector<Light> lights;                      // one point light per painting
-  ViewCamera start;                               // standing in the room, facing the back wall
+  std::vector<Vec3d> centres_mm;                  // each canvas centre, world frame
+  std::vector<Light> lights;                      // one picture light per painting
+  ViewCamera start;  // a visitor view_distance_mm from the first painting, the room and the next
+                     // painting in view
   double width_mm = 0, depth_mm = 0, height_mm = 0;
 };
 
@@ -43,6 +47,11 @@ struct Gallery {
 // centre read radiance 1 (paper white, as scene_setup.h). An empty list gives the empty room.
 Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm,
                     const GalleryOptions& options = {});
+
+// A close view of painting `index` that shows its relief: from 35 cm, 35 deg off its normal
+// towards the left and a little above, looking at the centre (the picture light then rakes
+// across the relief towards the camera's side).
+ViewCamera CloseUpView(const Gallery& gallery, size_t index);
 
 // Reads a pack for the viewer (ReadPack). The error names the file; nothing is thrown.
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path);
@@ -60,6 +69,8 @@ struct GalleryShotOptions {
   double exposure = 1.0;
   // The run's inputs (packs, camera path): no screenshot is written onto, into or above them.
   std::vector<std::filesystem::path> inputs;
+  // Without a camera path: also the first painting's CloseUpView, written here (empty: not).
+  std::filesystem::path close_up;
   GalleryShotOptions() { render.ambient = 0.05; }
 };
 
@@ -68,8 +79,9 @@ struct GalleryShotOptions {
 std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_t index,
                                      size_t count);
 
-// Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (or each
-// camera of `path` when given, written to ScreenshotPath(out_png, i, path.size())) and writes
+// Headless (EGL surfaceless): hangs the packs in a gallery, renders its start view (and the
+// close-up when options.close_up is set), or each camera of `path` when given (written to
+// ScreenshotPath(out_png, i, path.size())), and writes
 // 8-bit sRGB images in the format the extension names (.png, .jpg, .tif; .exr holds their linear
 // values), creating out_png's folder when missing. Errors, before anything is rendered: an
 // unknown extension, an output onto, into or above an input or the current directory

@@ -54,6 +54,7 @@
 #include "digitize/core.h"
 #include "digitize/pack.h"
 #include "digitize/photo_set.h"
+#include "digitize_viewer/stylise.h"
 #include "digitize_viewer/view.h"
 
 namespace digitize::viewer {
@@ -152,6 +153,16 @@ struct RenderOptions {
   // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
   // Off by default, as in the paper; RenderRelit with shadows on is its reference.
   bool shadows = false;
+  // Stylised looks (stylise.h): the realistic render redrawn by a screen pass.
+  Style style = Style::kRealistic;
+  double exposure = 1.0;             // the display value the styles take their tone from
+                                     // (DisplayColour); screenshots tone-map with the same
+  double style_tile_px = 256;        // watercolor, binary, collage: the on-screen size of the solid
+                                     // texture's first octave at the start of a zoom cycle
+  double hatching_tile_px = 192;     // hatching: a tonal art map tile's on-screen size at the
+                                     // start of a zoom cycle (half of it at the end)
+  bool style_debug_texture = false;  // the dynamic solid texture's pigment channel, grey
+                                     // (what the infinite-zoom tests measure)
   // Debug views (the gallery's panel).
   bool alpha_heatmap = false;  // colour relief fragments by their box's alpha (blue 0 .. red 1),
                                // the bump plane dark grey
@@ -159,7 +170,8 @@ struct RenderOptions {
 
   // Finite, k > 0, 0 <= eps_min < eps_max, max_error_px > 0, steps in range; light_direction
   // unit with z > 0, light_irradiance >= 0, raking elevation in (0, 90], specular_diffuse and
-  // specular_gain >= 0, specular_sharpen >= 1.
+  // specular_gain >= 0, specular_sharpen >= 1, exposure, style_tile_px and hatching_tile_px
+  // > 0.
   Status Validate() const;
 };
 
@@ -183,10 +195,33 @@ struct RenderedImage {
   double ms = 0;  // Draw + glFinish, steady clock
 };
 
-// A wall, floor or frame of the gallery: an axis-aligned box in the world frame, Lambertian.
+// How a room box shades (scene.frag): Lambertian with a plain albedo, the albedo patterned as
+// floorboards (boards along world Y, each its own tint, with grain), or a lamp's lens that emits
+// its albedo as radiance.
+enum class SceneSurface { kPlain = 0, kFloorboards = 1, kEmissive = 2 };
+
+// A wall, floor or frame of the gallery: an axis-aligned box in the world frame.
 struct SceneBox {
   Vec3d min_mm = Vec3d::Zero(), max_mm = Vec3d::Zero();
   Vec3f albedo = Vec3f::Constant(0.5f);
+  SceneSurface surface = SceneSurface::kPlain;
+};
+
+// A point light's cone on the room (walls, floor, frames): full strength within inner_deg of
+// `axis`, none beyond outer_deg, smooth between. The paintings see the light without the cone:
+// the gallery aims it so that the whole frame is within inner_deg.
+struct SpotCone {
+  Vec3d axis = -Vec3d::UnitZ();  // unit, from the light
+  double inner_deg = 180, outer_deg = 180;
+};
+
+// What the room is made of and how it is lit besides Draw's lights.
+struct Room {
+  std::vector<SceneBox> boxes;
+  std::vector<SpotCone> spots;  // spots[i] shapes Draw's lights[i]; a light without one is bare
+  // Light bounced round the room, radiance = albedo x ambient x (0.75 + 0.25 n.z): surfaces
+  // facing up (floor) a little brighter than walls, the ceiling's underside a little darker.
+  double ambient = 0;
 };
 
 class Renderer {
@@ -205,7 +240,7 @@ class Renderer {
                           const RigidTransform& world_from_canvas = {},
                           const MeshOptions& mesh = {});
   int painting_count() const;
-  void SetSceneBoxes(const std::vector<SceneBox>& boxes);  // the room; empty = none
+  void SetRoom(const Room& room);  // the room; empty = none
 
   // Draws everything into the currently bound framebuffer (viewport = camera size), clearing it
   // to black. Point and directional lights (world frame), at most kMaxLights; options.mode may
@@ -237,7 +272,17 @@ class Renderer {
   std::unique_ptr<Impl> impl_;
 };
 
-// Linear radiance -> 8-bit sRGB (exposure multiplies first; clamped). For screenshots.
+// Linear radiance -> display value in [0, 1] (before the sRGB encoding). Exposure multiplies
+// first; then a highlight shoulder on the largest channel M: up to kToneKnee it passes unchanged
+// (the paintings' midtones stay as photographed), above it M' = k + (1 - k) x / (1 + x), x = (M -
+// k) / (1 - k) (continuous with slope 1 at the knee, below 1 for every M, gentle enough to keep
+// highlights apart: paper white reads 0.875, 2x paper white 0.95, 10x 0.99),
+// the colour scaled by M' / M so it keeps its hue and saturation. Gold leaf under a picture light
+// stays gold instead of clipping to white (a shoulder on luminance cannot: the only colour of
+// luminance 1 is white). Non-finite or negative input reads 0.
+inline constexpr double kToneKnee = 0.75;
+Vec3f DisplayColour(const Vec3f& linear, double exposure = 1.0);
+// DisplayColour -> 8-bit sRGB. For screenshots.
 Grid<std::array<uint8_t, 3>> ToneMap(const Grid<Vec3f>& rgb, double exposure = 1.0);
 
 }  // namespace digitize::viewer
