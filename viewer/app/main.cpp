@@ -3,7 +3,7 @@
 //
 //   digitize-viewer [PACK.pack.exr ...] [--synthetic] [--technique adaptive]
 //                   [--mode relit|light|specular|normals|raking]
-//                   [--style realistic|watercolor|binary|collage|hatching]
+//                   [--style realistic|watercolor|binary|collage|hatching|painterly]
 //                   [--screenshot shot.png [--camera-path path.json | --close-up near.png]
 //                    [--size 1280x720] [--exposure 1]]
 //
@@ -208,9 +208,13 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     const char* modes[] = {"relit (gallery lights)", "light (drag: left button)",
                            "specular enhancement", "normals", "raking light"};
     ImGui::Combo("mode", &mode, modes, 5);
-    const char* styles[] = {"realistic", "watercolor (seed 003)", "binary, pen and ink (seed 003)",
-                            "collage (seed 003)", "hatching, tonal art maps (seed 004)"};
-    ImGui::Combo("style", &style, styles, 5);
+    const char* styles[] = {"realistic",
+                            "watercolor (seed 003)",
+                            "binary, pen and ink (seed 003)",
+                            "collage (seed 003)",
+                            "hatching, tonal art maps (seed 004)",
+                            "painterly strokes (seed 002)"};
+    ImGui::Combo("style", &style, styles, 6);
     if (ViewMode(mode) == ViewMode::kLight || ViewMode(mode) == ViewMode::kSpecular) {
       const Vec3d& d = options.light_direction;
       ImGui::Text("light: azimuth %.0f deg, elevation %.0f deg",
@@ -313,7 +317,7 @@ int main(int argc, char** argv) {
   double exposure = 1.0;
   app.add_option("--style", style,
                  "look: realistic, or a stylised mode over room and paintings: watercolor, "
-                 "binary (pen and ink), collage, hatching (tonal art maps)");
+                 "binary (pen and ink), collage, hatching (tonal art maps), painterly (strokes)");
   app.add_option("--close-up", close_up,
                  "with --screenshot: also a close view of the first painting, into this image");
   app.add_option("--exposure", exposure, "screenshots: exposure before the tone curve");

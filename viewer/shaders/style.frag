@@ -1,6 +1,7 @@
 // The style pass (stylise.h): the realistic render's colour and depth in, the stylised colour
 // out (linear radiance, so that ToneMap with the same exposure shows the styled display value).
 #version 450 core
+#include "style_common.glsl"
 layout(binding = 0) uniform sampler2D u_colour;    // linear radiance
 layout(binding = 1) uniform sampler2D u_depth;     // window depth, 1 = nothing drawn
 layout(binding = 2) uniform sampler3D u_solid;     // SolidTexture: r pigment, g grain, b strokes,
@@ -9,39 +10,16 @@ layout(binding = 3) uniform sampler2DArray u_tam;  // tonal art map: layer = ton
 uniform mat4 u_world_from_clip;
 uniform vec3 u_eye;
 uniform vec3 u_forward;      // the camera's viewing direction (unit)
-uniform float u_exposure;
-uniform float u_knee;        // renderer.h kToneKnee
 uniform float u_tile;        // solid texture: octave 1 spans u_tile x 2^floor(log2 z) mm
 uniform float u_tam_tile;    // hatching: a tonal art map tile spans u_tam_tile x 2^floor(log2 z)
                              // mm (and twice that, blended over the zoom cycle)
 uniform float u_tam_ink[6];  // mean ink of each tone
-uniform int u_style;         // stylise.h Style: 1 watercolor, 2 binary, 3 collage, 4 hatching
+uniform int u_style;         // stylise.h Style: 1 watercolor, 2 binary, 3 collage, 4 hatching,
+                             // 5 painterly (this pass: the canvas under the strokes)
 uniform int u_debug;         // 1: the contrast-restored pigment texture itself, grey
 out vec4 o_color;
 
-const vec3 kLuma = vec3(0.2126, 0.7152, 0.0722);
 const vec3 kPaper = vec3(0.97, 0.95, 0.90);  // display value of the paper the styles draw on
-
-// renderer.h DisplayColour, and back.
-vec3 Display(vec3 c) {
-  c = max(c * u_exposure, vec3(0.0));
-  float top = max(c.r, max(c.g, c.b));
-  if (top > u_knee) {
-    float x = (top - u_knee) / (1.0 - u_knee);
-    c *= (u_knee + (1.0 - u_knee) * x / (1.0 + x)) / top;
-  }
-  return clamp(c, 0.0, 1.0);
-}
-vec3 Linear(vec3 d) {
-  d = clamp(d, 0.0, 1.0);
-  float m = min(max(d.r, max(d.g, d.b)), 0.995);
-  vec3 c = d;
-  if (m > u_knee) {
-    float y = (m - u_knee) / (1.0 - u_knee);
-    c *= (u_knee + (1.0 - u_knee) * y / (1.0 - y)) / m;
-  }
-  return c / u_exposure;
-}
 
 vec3 WorldAt(vec2 frag, float depth) {
   vec4 ndc = vec4(frag / vec2(textureSize(u_colour, 0)) * 2.0 - 1.0, depth * 2.0 - 1.0, 1.0);

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "digitize_viewer/painterly_strokes.h"
 #include "digitize_viewer/painting_setup.h"
 #include "digitize_viewer/tonal_art_map.h"
 #include "embedded_shaders.h"
@@ -298,6 +299,10 @@ Status RenderOptions::Validate() const {
     return Error{"exposure, style_tile_px and hatching_tile_px must be > 0, got " +
                  FormatNumber(exposure) + ", " + FormatNumber(style_tile_px) + ", " +
                  FormatNumber(hatching_tile_px)};
+  if (!finite(stroke_spacing_px) || stroke_spacing_px < 2 || stroke_spacing_px > 200 ||
+      !finite(stroke_fidelity) || stroke_fidelity <= 0)
+    return Error{"stroke_spacing_px must be in [2, 200] and stroke_fidelity > 0, got " +
+                 FormatNumber(stroke_spacing_px) + ", " + FormatNumber(stroke_fidelity)};
   if (!finite(ambient) || ambient < 0)
     return Error{"ambient must be >= 0, got " + FormatNumber(ambient)};
   return Status::Ok();
@@ -305,7 +310,9 @@ Status RenderOptions::Validate() const {
 
 struct Renderer::Impl {
   GLuint plane_program = 0, box_program = 0, mesh_program = 0, scene_program = 0;
-  GLuint style_program = 0;
+  GLuint style_program = 0, stroke_program = 0;
+  GLuint stroke_vao = 0, stroke_vbo = 0;
+  std::vector<StrokeFace> room_faces;  // the room's boxes, for the painterly strokes
   // The styles' inputs: the realistic render (colour + depth textures), made on first use, and
   // their textures (the noise cube, the tonal art map), built on first use.
   GLuint style_fbo = 0, style_colour = 0, style_depth = 0;
@@ -334,8 +341,11 @@ struct Renderer::Impl {
         glDeleteBuffers(1, &p.mesh_ibo);
       }
     }
-    for (GLuint prog : {plane_program, box_program, mesh_program, scene_program, style_program})
+    for (GLuint prog :
+         {plane_program, box_program, mesh_program, scene_program, style_program, stroke_program})
       if (prog) glDeleteProgram(prog);
+    if (stroke_vao) glDeleteVertexArrays(1, &stroke_vao);
+    if (stroke_vbo) glDeleteBuffers(1, &stroke_vbo);
     const GLuint style_textures[] = {style_colour, style_depth, solid_texture, tam_texture};
     glDeleteTextures(4, style_textures);
     if (style_fbo) glDeleteFramebuffers(1, &style_fbo);
@@ -494,6 +504,19 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
   auto style = Link(shaders::kStyleVertex, shaders::kStyleFragment, "style pass");
   if (!style) return style.error();
   m.style_program = *style;
+  auto stroke = Link(shaders::kStrokeVertex, shaders::kStrokeFragment, "painterly strokes");
+  if (!stroke) return stroke.error();
+  m.stroke_program = *stroke;
+  glCreateBuffers(1, &m.stroke_vbo);
+  glCreateVertexArrays(1, &m.stroke_vao);
+  glVertexArrayVertexBuffer(m.stroke_vao, 0, m.stroke_vbo, 0, 5 * sizeof(float));
+  glVertexArrayBindingDivisor(m.stroke_vao, 0, 1);
+  glEnableVertexArrayAttrib(m.stroke_vao, 0);
+  glVertexArrayAttribFormat(m.stroke_vao, 0, 4, GL_FLOAT, GL_FALSE, 0);
+  glVertexArrayAttribBinding(m.stroke_vao, 0, 0);
+  glEnableVertexArrayAttrib(m.stroke_vao, 1);
+  glVertexArrayAttribFormat(m.stroke_vao, 1, 1, GL_FLOAT, GL_FALSE, 4 * sizeof(float));
+  glVertexArrayAttribBinding(m.stroke_vao, 1, 0);
 
   glCreateVertexArrays(1, &m.empty_vao);
   const std::vector<float> cube = CubeTriangles(), edges = CubeEdges();
@@ -604,6 +627,7 @@ void Renderer::SetRoom(const Room& room) {
                     GL_STATIC_DRAW);
   impl_->scene_count = room.boxes.size();
   impl_->spots = room.spots;
+  impl_->room_faces = BoxFaces(room.boxes);
   impl_->room_ambient = room.ambient;
 }
 
@@ -913,6 +937,48 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     glBindTextureUnit(3, m.tam_texture);
     glBindVertexArray(m.empty_vao);
     glDrawArrays(GL_TRIANGLES, 0, 3);
+    if (options.style == Style::kPainterly) {
+      // The strokes over it: the room's faces and each canvas (its bump plane), farthest first.
+      std::vector<StrokeFace> faces = m.room_faces;
+      for (const Painting& p : m.paintings) {
+        StrokeFace f;
+        f.origin = p.world_from_canvas.Apply(Vec3d(0, 0, p.delta0_mm));
+        f.u = p.world_from_canvas.ApplyToDirection(Vec3d::UnitX());
+        f.v = p.world_from_canvas.ApplyToDirection(Vec3d::UnitY());
+        f.u_len = p.width_mm;
+        f.v_len = p.height_mm;
+        f.id = uint32_t(faces.size()) + 7919u;
+        faces.push_back(f);
+      }
+      StrokeSelectOptions so;
+      so.spacing_px = options.stroke_spacing_px;
+      const std::vector<StrokeAnchor> anchors = SelectStrokeAnchors(faces, camera, so);
+      std::vector<float> data;
+      data.reserve(anchors.size() * 5);
+      for (const StrokeAnchor& a : anchors)
+        data.insert(data.end(), {a.position.x(), a.position.y(), a.position.z(), a.weight,
+                                 float(a.id & 0xffffffu)});
+      stats.strokes = anchors.size();
+      if (!anchors.empty()) {
+        glNamedBufferData(m.stroke_vbo, data.size() * sizeof(float), data.data(), GL_STREAM_DRAW);
+        const GLuint sp = m.stroke_program;
+        glUseProgram(sp);
+        set_mat(sp, "u_clip_from_world", clip_from_world);
+        glProgramUniform2f(sp, glGetUniformLocation(sp, "u_near_far"), float(camera.near_mm),
+                           float(camera.far_mm));
+        glProgramUniform1f(sp, glGetUniformLocation(sp, "u_spacing_px"),
+                           float(options.stroke_spacing_px));
+        glProgramUniform1f(sp, glGetUniformLocation(sp, "u_fidelity"),
+                           float(options.stroke_fidelity));
+        glProgramUniform1f(sp, glGetUniformLocation(sp, "u_exposure"), float(options.exposure));
+        glProgramUniform1f(sp, glGetUniformLocation(sp, "u_knee"), float(kToneKnee));
+        glEnable(GL_BLEND);
+        glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+        glBindVertexArray(m.stroke_vao);
+        glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(anchors.size()));
+        glDisable(GL_BLEND);
+      }
+    }
     glEnable(GL_DEPTH_TEST);
   }
   glBindVertexArray(0);

@@ -26,6 +26,8 @@ const char* ToString(Style s) {
       return "collage";
     case Style::kHatching:
       return "hatching";
+    case Style::kPainterly:
+      return "painterly";
   }
   return "?";
 }
@@ -34,7 +36,7 @@ Result<Style> ParseStyle(std::string_view name) {
   for (Style s : kAllStyles)
     if (name == ToString(s)) return s;
   return Error{"unknown style '" + std::string(name) +
-               "' (realistic, watercolor, binary, collage, hatching)"};
+               "' (realistic, watercolor, binary, collage, hatching, painterly)"};
 }
 
 ZoomCycle InfiniteZoom(double z_cam) {

@@ -161,6 +161,8 @@ struct RenderOptions {
                                      // texture's first octave at the start of a zoom cycle
   double hatching_tile_px = 192;     // hatching: a tonal art map tile's on-screen size at the
                                      // start of a zoom cycle (half of it at the end)
+  double stroke_spacing_px = 9;      // painterly: the strokes' spacing on screen
+  double stroke_fidelity = 0.25;     // painterly: colour distance (display RGB) that ends a stroke
   bool style_debug_texture = false;  // the dynamic solid texture's pigment channel, grey
                                      // (what the infinite-zoom tests measure)
   // Debug views (the gallery's panel).
@@ -170,8 +172,8 @@ struct RenderOptions {
 
   // Finite, k > 0, 0 <= eps_min < eps_max, max_error_px > 0, steps in range; light_direction
   // unit with z > 0, light_irradiance >= 0, raking elevation in (0, 90], specular_diffuse and
-  // specular_gain >= 0, specular_sharpen >= 1, exposure, style_tile_px and hatching_tile_px
-  // > 0.
+  // specular_gain >= 0, specular_sharpen >= 1, exposure, style_tile_px, hatching_tile_px,
+  // stroke_spacing_px and stroke_fidelity > 0.
   Status Validate() const;
 };
 
@@ -186,6 +188,7 @@ struct FrameStats {
   int boxes_drawn = 0;        // alpha > 0
   int boxes_blended = 0;      // 0 < alpha < 1
   size_t mesh_triangles = 0;  // kMesh: triangles drawn
+  size_t strokes = 0;         // painterly: anchors selected (drawn unless hidden)
   double cpu_ms = 0;          // CPU time to issue the frame (GL is asynchronous: see the bench)
 };
 

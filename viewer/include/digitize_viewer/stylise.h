@@ -18,6 +18,10 @@
 //     blends them; texture coordinates are the world position projected along the surface's
 //     dominant axis, scaled by the zoom cycle (the map at 2^k and 2^(k+1) blended by s) so a
 //     tile keeps its size on screen, and the map's mip levels keep the strokes' width.
+//   painterly -- strokes (seed 002): anchors fixed on the surfaces from a hierarchy that keeps
+//     their density on screen (painterly_strokes.h), each drawn as a soft quad with the
+//     render's colour at the anchor, oriented along its iso-luminance lines, shortened where the
+//     colour along it strays (fidelity), over the render itself.
 //
 // Layer: viewer (libdigitize only, no GL here).
 #pragma once
@@ -31,10 +35,10 @@
 
 namespace digitize::viewer {
 
-enum class Style { kRealistic, kWatercolor, kBinary, kCollage, kHatching };
+enum class Style { kRealistic, kWatercolor, kBinary, kCollage, kHatching, kPainterly };
 inline constexpr Style kAllStyles[] = {Style::kRealistic, Style::kWatercolor, Style::kBinary,
-                                       Style::kCollage, Style::kHatching};
-// "realistic", "watercolor", "binary", "collage", "hatching"
+                                       Style::kCollage,   Style::kHatching,   Style::kPainterly};
+// "realistic", "watercolor", "binary", "collage", "hatching", "painterly"
 const char* ToString(Style s);
 Result<Style> ParseStyle(std::string_view name);
 
