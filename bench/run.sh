@@ -13,6 +13,7 @@ gnuplot bench/plot_fit.gp && echo "wrote docs/bench_fit.png"
 gnuplot bench/plot_pack.gp && echo "wrote docs/bench_pack.png"
 ./build/bin/viewer_bench --csv-dir=docs | tee docs/bench_viewer.txt
 gnuplot bench/plot_viewer.gp && echo "wrote docs/bench_viewer.png"
+./build/bin/style_bench --csv-dir=docs | tee docs/bench_style.txt
 # The real RTI capture: PTM / HSH2 / HSH3 and digitize's fit, held-out 8-bit sRGB PSNR and time.
 if [ -d ../shared/data/rti_icon ]; then
   ./build/bin/rti_bench --data=../shared/data/rti_icon --csv-dir=docs

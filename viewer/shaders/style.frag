@@ -87,7 +87,8 @@ void main() {
   vec3 p = WorldAt(frag, depth);
   vec3 c = Display(lin);
   float y = dot(c, kLuma);
-  vec4 t = DynamicSolid(p);
+  // The noise cube only where it is used (four trilinear 3D lookups: most of this pass's cost).
+  vec4 t = u_style <= 3 || u_debug != 0 ? DynamicSolid(p) : vec4(0.5);
   if (u_debug != 0) { o_color = vec4(Linear(vec3(t.r)), 1.0); return; }
   vec3 outc = c;
   if (u_style == 1) {  // watercolor
@@ -102,7 +103,7 @@ void main() {
   } else if (u_style == 2) {  // binary: threshold structure vs the tone, plus outlines
     float ink = 1.0 - Drawn(y);
     bool dark = t.b < ink * 1.05 - 0.02 || DepthEdge(frag) > 0.03;
-    outc = dark ? vec3(0.05) : kPaper;
+    outc = dark ? vec3(0.02) : kPaper;
   } else if (u_style == 3) {  // collage: 4 tone bands, each its own paper strip
     float yw = y + 0.08 * (t.a - 0.5);
     int b = Band(yw);

@@ -12,6 +12,7 @@
 #include "digitize/pack.h"
 #include "digitize/photo_set.h"
 #include "digitize/relight.h"
+#include "digitize_viewer/renderer.h"
 #include "digitize_viewer/view.h"
 
 namespace digitize::viewer {
@@ -45,5 +46,22 @@ ViewCamera Supersampled(const ViewCamera& view, int s);
 Grid<Vec3f> Downsample(const Grid<Vec3f>& image, int s);
 Grid<uint8_t> DownsampleMask(const Grid<uint8_t>& mask, int s);
 inline constexpr int kCompareSupersampling = 4;
+
+// Temporal coherence of a look (the styles' test and benchmark): the painting rendered (world =
+// canvas frame, technique kBump so the depth buffer holds the bump plane z = delta0) along
+// `path`; each frame warped into the next through that plane and the two cameras, sampled
+// bilinearly. Mean absolute display-luminance residual over the canvas pixels seen in both
+// frames (8 px from the image border, 2 mm inside the canvas), warped and unwarped: marks that
+// move with the surface make the first small and far below the second.
+struct CoherenceResidual {
+  double warped = 0, unwarped = 0;
+  size_t pixels = 0;  // summed over the path's steps
+};
+CoherenceResidual MeasureCoherence(Renderer& renderer, const Pack& pack, const Light& light,
+                                   const std::vector<ViewCamera>& path,
+                                   const RenderOptions& options);
+// A slow path over the painting from its framed face view: `steps` steps, each 0.5 % of the
+// distance sideways, 0.2 % up and 1 % closer.
+std::vector<ViewCamera> SlowPath(const Pack& pack, int width, int height, int steps);
 
 }  // namespace digitize::viewer
