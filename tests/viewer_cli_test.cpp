@@ -165,4 +165,41 @@ TEST_F(ViewerCliTest, EveryViewModeWritesItsScreenshot) {
   EXPECT_FALSE(fs::exists(Path("bad.png")));
 }
 
+// --style: every style writes its screenshot (and close-up), each unlike the others; --tour
+// writes its frames; usage errors (an unknown style, two camera paths, a video without a path)
+// exit 1 and write nothing.
+TEST_F(ViewerCliTest, EveryStyleAndTheTourWriteTheirImages) {
+  std::string previous;
+  for (const char* style :
+       {"realistic", "watercolor", "binary", "collage", "hatching", "painterly"}) {
+    const std::string shot = std::string(style) + ".png", near = std::string(style) + "_near.png";
+    const Output out = RunViewer(std::string("--synthetic --size 160x90 --style ") + style +
+                                 " --screenshot " + shot + " --close-up " + near);
+    ASSERT_EQ(out.exit_code, 0) << style << "\n" << out.text;
+    std::ifstream in(Path(shot), std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    EXPECT_GT(ss.str().size(), 100u) << style;
+    EXPECT_NE(ss.str(), previous) << style << " wrote the same image as the style before it";
+    EXPECT_TRUE(fs::exists(Path(near))) << style;
+    previous = ss.str();
+  }
+  const Output tour = RunViewer("--synthetic --size 64x36 --tour 5 --screenshot t/tour.png");
+  ASSERT_EQ(tour.exit_code, 0) << tour.text;
+  for (int i = 0; i < 5; ++i)
+    EXPECT_TRUE(fs::exists(Path("t/tour_00" + std::to_string(i) + ".png"))) << i;
+  for (const char* args : {"--synthetic --style oil --screenshot bad.png",
+                           "--synthetic --tour 5 --camera-path x.json --screenshot bad.png",
+                           "--synthetic --video v.mp4 --screenshot bad.png",
+                           "--synthetic --tour 1 --screenshot bad.png"}) {
+    const Output bad = RunViewer(args);
+    EXPECT_EQ(bad.exit_code, 1) << args << "\n" << bad.text;
+    EXPECT_FALSE(fs::exists(Path("bad.png"))) << args;
+    EXPECT_FALSE(fs::exists(Path("v.mp4"))) << args;
+  }
+  EXPECT_NE(
+      RunViewer("--synthetic --style oil --screenshot bad.png").text.find("unknown style 'oil'"),
+      std::string::npos);
+}
+
 }  // namespace

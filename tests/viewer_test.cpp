@@ -601,6 +601,76 @@ TEST(ViewerTest, GalleryStartViewShowsTheRoomAndTwoPaintings) {
   EXPECT_TRUE(near.Validate().ok());
 }
 
+// The tour walks from the start view past every painting, inside the room, without jumps, and
+// stands in front of each painting facing it.
+TEST(ViewerTest, GalleryTourVisitsEveryPaintingSmoothly) {
+  const Gallery g = MakeGallery({Eigen::Vector2d(400, 300), Eigen::Vector2d(64, 48)});
+  const std::vector<ViewCamera> tour = GalleryTour(g, 120, 320, 180);
+  ASSERT_EQ(tour.size(), 120u);
+  EXPECT_LT((tour.front().eye_mm - g.start.eye_mm).norm(), 1e-6);
+  double longest = 0, total = 0;
+  for (size_t i = 0; i < tour.size(); ++i) {
+    EXPECT_TRUE(tour[i].Validate().ok()) << i;
+    EXPECT_EQ(tour[i].width, 320);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GT(tour[i].eye_mm[k], 0) << i;
+      EXPECT_LT(tour[i].eye_mm[k], Vec3d(g.width_mm, g.depth_mm, g.height_mm)[k]) << i;
+    }
+    if (i > 0) {
+      const double step = (tour[i].eye_mm - tour[i - 1].eye_mm).norm();
+      longest = std::max(longest, step);
+      total += step;
+    }
+  }
+  EXPECT_LT(longest, 4 * total / (tour.size() - 1)) << "a jump in the walk";
+  for (size_t p = 0; p < g.centres_mm.size(); ++p) {
+    double nearest = 1e300;
+    bool facing = false;
+    for (const ViewCamera& c : tour) {
+      const double d = (c.eye_mm - g.centres_mm[p]).norm();
+      if (d < nearest) {
+        nearest = d;
+        facing =
+            (c.target_mm - c.eye_mm).normalized().dot((g.centres_mm[p] - c.eye_mm).normalized()) >
+            0.99;
+      }
+    }
+    EXPECT_LT(nearest, 1.05 * std::clamp(3 * g.sizes_mm[p].maxCoeff(), 400.0, 1200.0)) << p;
+    EXPECT_TRUE(facing) << "painting " << p;
+  }
+}
+
+// A video of a tour: refused without images or over an existing file; without ffmpeg an error
+// that says so; with it, a file.
+TEST(ViewerTest, TourVideoIsRefusedOrWritten) {
+  const auto dir = TempDir();
+  std::filesystem::create_directories(dir);
+  EXPECT_FALSE(WriteVideo(dir / "t.png", 1, dir / "t.mp4").ok());
+  { std::ofstream(dir / "there.mp4") << "not ours"; }
+  const Status over = WriteVideo(dir / "t.png", 4, dir / "there.mp4");
+  EXPECT_FALSE(over.ok());
+  EXPECT_NE(over.message().find("already exists"), std::string::npos) << over.message();
+  std::ifstream kept(dir / "there.mp4");
+  std::string text;
+  std::getline(kept, text);
+  EXPECT_EQ(text, "not ours");
+  Grid<std::array<uint8_t, 3>> img(64, 48);
+  for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = {uint8_t(i), uint8_t(i / 64), 90};
+  for (size_t i = 0; i < 4; ++i)
+    ASSERT_TRUE(WritePngRgb8(ScreenshotPath(dir / "t.png", i, 4), img).ok());
+  const Status made = WriteVideo(dir / "t.png", 4, dir / "t.mp4");
+  const bool has_ffmpeg = std::system("command -v ffmpeg > /dev/null 2>&1") == 0;
+  if (has_ffmpeg) {
+    EXPECT_TRUE(made.ok()) << made.message();
+    EXPECT_GT(std::filesystem::file_size(dir / "t.mp4"), 100u);
+  } else {
+    EXPECT_FALSE(made.ok());
+    EXPECT_NE(made.message().find("ffmpeg is not installed"), std::string::npos) << made.message();
+    EXPECT_FALSE(std::filesystem::exists(dir / "t.mp4"));
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // The display transform: midtones (up to the knee) pass unchanged, highlights roll off below 1
 // monotonically and keep their hue; a gold highlight 4x paper white stays gold, not white.
 TEST(ViewerTest, DisplayColourKeepsMidtonesAndHueOfHighlights) {

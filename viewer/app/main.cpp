@@ -5,7 +5,7 @@
 //                   [--mode relit|light|specular|normals|raking]
 //                   [--style realistic|watercolor|binary|collage|hatching|painterly]
 //                   [--screenshot shot.png [--camera-path path.json | --close-up near.png]
-//                    [--size 1280x720] [--exposure 1]]
+//                    [--tour N [--video tour.mp4]] [--size 1280x720] [--exposure 1]]
 //
 // With a display: a GLFW window (OpenGL 4.5 core), walk with W/A/S/D (Q/E down/up, shift
 // faster), look by dragging with the right mouse button; in the light and specular modes the
@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -321,6 +322,15 @@ int main(int argc, char** argv) {
   app.add_option("--close-up", close_up,
                  "with --screenshot: also a close view of the first painting, into this image");
   app.add_option("--exposure", exposure, "screenshots: exposure before the tone curve");
+  int tour = 0;
+  std::string video;
+  app.add_option("--tour", tour,
+                 "with --screenshot: a scripted walk past every painting in N frames "
+                 "(shot_000.png ...)")
+      ->check(CLI::Range(2, 100000));
+  app.add_option("--video", video,
+                 "with --tour or --camera-path: also encode the frames into this video (.mp4; "
+                 "needs Debian's ffmpeg)");
   double light_azimuth = 135, light_elevation = 45, raking_azimuth = 180, raking_elevation = 10;
   app.add_option("--mode", mode,
                  "view mode: relit (the gallery's lights), light (a directional light: the left "
@@ -433,7 +443,28 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "digitize-viewer: --size must be WxH, got '%s'\n", size.c_str());
       return 1;
     }
+    if (tour > 0 && !camera_path.empty()) {
+      std::fprintf(stderr,
+                   "digitize-viewer: --tour and --camera-path are two camera paths; give one\n");
+      return 1;
+    }
+    if (!video.empty() && tour == 0 && camera_path.empty()) {
+      std::fprintf(stderr, "digitize-viewer: --video needs --tour N or --camera-path\n");
+      return 1;
+    }
+    if (!video.empty()) {
+      std::error_code ec;
+      if (std::filesystem::exists(video, ec)) {  // before anything is rendered
+        std::fprintf(stderr,
+                     "digitize-viewer: %s: already exists (a video is never written over "
+                     "a file)\n",
+                     video.c_str());
+        return 1;
+      }
+      shot.inputs.emplace_back(video);  // never a screenshot onto it
+    }
     std::vector<ViewCamera> path;
+    if (tour > 0) path = GalleryTour(HangPaintings(packs).gallery, tour, shot.width, shot.height);
     if (!camera_path.empty()) {
       auto p = ReadCameraPath(camera_path);
       if (!p) {
@@ -457,6 +488,13 @@ int main(int argc, char** argv) {
                   frames);
     std::printf(" (%zu painting(s), %zu failed to load)\n", packs.size() - (errors.size() - loaded),
                 errors.size());
+    if (!video.empty()) {
+      if (Status v = WriteVideo(screenshot, frames, video); !v.ok()) {
+        std::fprintf(stderr, "digitize-viewer: %s\n", v.message().c_str());
+        return 1;
+      }
+      std::printf("wrote %s (%zu frames, 24 fps)\n", video.c_str(), frames);
+    }
     return errors.empty() ? 0 : 1;
   }
   return RunWindow(packs, errors, options, window_frames, window_shot);

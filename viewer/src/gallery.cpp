@@ -1,5 +1,9 @@
 #include "digitize_viewer/gallery.h"
 
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -144,6 +148,40 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   for (size_t i = 0; i < cameras.size(); ++i) {
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, render);
     if (Status s = WriteRgb8(outs[i], ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Status WriteVideo(const std::filesystem::path& first_png, size_t count,
+                  const std::filesystem::path& video, double fps) {
+  if (count < 2) return Error{video.string() + ": a video needs at least 2 images"};
+  if (!(fps > 0 && fps <= 240)) return Error{video.string() + ": fps must be in (0, 240]"};
+  std::error_code ec;
+  if (std::filesystem::exists(video, ec))
+    return Error{video.string() + ": already exists (a video is never written over a file)"};
+  // The images' names as ffmpeg's pattern: stem_%03d.ext (ScreenshotPath's numbering).
+  const std::string pattern = (first_png.parent_path() / (first_png.stem().string() + "_%03d" +
+                                                          first_png.extension().string()))
+                                  .string();
+  const std::string rate = FormatNumber(fps);
+  std::vector<std::string> args = {
+      "ffmpeg",      "-nostdin", "-n",      "-loglevel", "error",
+      "-framerate",  rate,       "-i",      pattern,     "-c:v",
+      "libx264",     "-pix_fmt", "yuv420p", "-vf",       "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+      video.string()};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  // No shell: file names reach ffmpeg as they are.
+  if (posix_spawnp(&pid, "ffmpeg", nullptr, nullptr, argv.data(), environ) != 0)
+    return Error{video.string() +
+                 ": ffmpeg is not installed (Debian: apt install ffmpeg); the images are written"};
+  int status = 0;
+  if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::filesystem::remove(video, ec);  // ffmpeg's own partial file (-n: nothing was there)
+    return Error{video.string() + ": ffmpeg failed (exit " +
+                 std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")"};
   }
   return Status::Ok();
 }

@@ -105,6 +105,7 @@ Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm, const GalleryO
     AddFrame(boxes, x0, z0, x0 + s.x(), z0 + s.y(), wall_y, o.frame_mm);
     const Vec3d centre(x0 + s.x() / 2, wall_y, o.centre_height_mm);
     g.centres_mm.push_back(centre);
+    g.sizes_mm.push_back(s);
     Light light;
     light.type = LightType::kPoint;
     light.position_mm = centre + o.light_distance_mm * Vec3d(0, -std::cos(a), std::sin(a));
@@ -155,6 +156,60 @@ ViewCamera CloseUpView(const Gallery& gallery, size_t index) {
   v.near_mm = 5;
   v.far_mm = 4 * (gallery.width_mm + gallery.depth_mm + gallery.height_mm);
   return v;
+}
+
+std::vector<ViewCamera> GalleryTour(const Gallery& g, int frames, int width, int height) {
+  DIGITIZE_CHECK(frames >= 2, "GalleryTour: at least 2 frames");
+  std::vector<ViewCamera> keys = {g.start};
+  for (size_t i = 0; i < g.centres_mm.size(); ++i) {
+    ViewCamera front = g.start;
+    const double d = std::clamp(3 * g.sizes_mm[i].maxCoeff(), 400.0, 1200.0);
+    front.eye_mm = g.centres_mm[i] + Vec3d(0, -d, 0.04 * d);
+    front.target_mm = g.centres_mm[i];
+    keys.push_back(front);
+    if (i == 0) {
+      ViewCamera near = CloseUpView(g, 0);
+      near.fov_y_deg = g.start.fov_y_deg;
+      keys.push_back(near);
+      keys.push_back(front);  // and back before walking on
+    }
+  }
+  // Each leg's share of the frames: the eye's walk plus the gaze's swing (mm at 1 m).
+  std::vector<double> length(keys.size(), 0.0);
+  for (size_t k = 1; k < keys.size(); ++k) {
+    const Vec3d a = (keys[k - 1].target_mm - keys[k - 1].eye_mm).normalized();
+    const Vec3d b = (keys[k].target_mm - keys[k].eye_mm).normalized();
+    length[k] =
+        length[k - 1] + (keys[k].eye_mm - keys[k - 1].eye_mm).norm() + 1000 * (a - b).norm();
+  }
+  std::vector<ViewCamera> out;
+  const double total = length.back();
+  for (int f = 0; f < frames; ++f) {
+    const double at = total * f / (frames - 1);
+    size_t k = 1;
+    while (k + 1 < keys.size() && length[k] < at) ++k;
+    ViewCamera c = keys.size() == 1 ? keys[0] : keys[k];
+    if (keys.size() > 1 && length[k] > length[k - 1]) {
+      const double u = std::clamp((at - length[k - 1]) / (length[k] - length[k - 1]), 0.0, 1.0);
+      const double e = u * u * (3 - 2 * u);  // ease in and out: no jolt at a stop
+      c.eye_mm = (1 - e) * keys[k - 1].eye_mm + e * keys[k].eye_mm;
+      // The gaze turns through the direction, not the target point (which may jump sideways).
+      const Vec3d a = (keys[k - 1].target_mm - keys[k - 1].eye_mm).normalized();
+      const Vec3d b = (keys[k].target_mm - keys[k].eye_mm).normalized();
+      Vec3d d = (1 - e) * a + e * b;
+      if (d.norm() < 1e-6) d = b;
+      c.target_mm = c.eye_mm + 1000 * d.normalized();
+      c.near_mm = std::min(keys[k - 1].near_mm, keys[k].near_mm);
+    }
+    c.width = width;
+    c.height = height;
+    c.up = Vec3d::UnitZ();
+    c.eye_mm.x() = std::clamp(c.eye_mm.x(), 100.0, g.width_mm - 100);
+    c.eye_mm.y() = std::clamp(c.eye_mm.y(), 100.0, g.depth_mm - 100);
+    c.eye_mm.z() = std::clamp(c.eye_mm.z(), 100.0, g.height_mm - 100);
+    out.push_back(c);
+  }
+  return out;
 }
 
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path) { return ReadPack(path); }

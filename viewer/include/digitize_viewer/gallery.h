@@ -37,6 +37,7 @@ struct Gallery {
   Room room;                                      // boxes, the picture lights' cones, ambient
   std::vector<RigidTransform> world_from_canvas;  // one per painting, in the given order
   std::vector<Vec3d> centres_mm;                  // each canvas centre, world frame
+  std::vector<Eigen::Vector2d> sizes_mm;          // each canvas (width, height)
   std::vector<Light> lights;                      // one picture light per painting
   ViewCamera start;  // a visitor view_distance_mm from the first painting, the room and the next
                      // painting in view
@@ -52,6 +53,13 @@ Gallery MakeGallery(const std::vector<Eigen::Vector2d>& sizes_mm,
 // towards the left and a little above, looking at the centre (the picture light then rakes
 // across the relief towards the camera's side).
 ViewCamera CloseUpView(const Gallery& gallery, size_t index);
+
+// A scripted tour (`digitize-viewer --tour N`): from the start view to the front of the first
+// painting (3x its longer side away, 0.4 to 1.2 m), up to its close-up and back, then to the
+// front of each next painting in turn; `frames`
+// (>= 2) cameras of width x height, eased in and out between those key views and spread by the
+// distance walked, every eye inside the room. An empty gallery tours its start view only.
+std::vector<ViewCamera> GalleryTour(const Gallery& gallery, int frames, int width, int height);
 
 // Reads a pack for the viewer (ReadPack). The error names the file; nothing is thrown.
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path);
@@ -94,5 +102,12 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
                                 const std::vector<ViewCamera>& path = {},
                                 const GalleryShotOptions& options = {},
                                 std::vector<std::string>* failed = nullptr);
+
+// Encodes the images ScreenshotPath(first_png, i, count), i = 0 .. count - 1, into `video`
+// (H.264 in the container its extension names, `fps` frames a second) with ffmpeg, run without a
+// shell. Errors: fewer than 2 images, ffmpeg not installed (the message says so: Debian's
+// package `ffmpeg`), `video` already there (never overwritten), ffmpeg failing (its exit code).
+Status WriteVideo(const std::filesystem::path& first_png, size_t count,
+                  const std::filesystem::path& video, double fps = 24);
 
 }  // namespace digitize::viewer
