@@ -49,6 +49,9 @@ configure() {  # configure DIR [cmake args...]: each folder always gets the same
   if command -v ccache > /dev/null; then
     # Paths relative to the checkout, so another clone of the same sources hits the cache.
     export CCACHE_BASEDIR="$root"
+    # The tests' precompiled header (tests/CMakeLists.txt): ccache caches files built with it
+    # only when told to ignore the header's timestamps and defines it cannot see.
+    export CCACHE_SLOPPINESS=pch_defines,time_macros,include_file_mtime,include_file_ctime
     launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   fi
   cmake -S "$root" -B "$dir" -G Ninja -DDIGITIZE_BUILD_TESTS=ON "${launcher[@]}" "$@" > "$dir.configure.log" 2>&1 ||
