@@ -113,6 +113,7 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   int frame = 0;
   bool shot_failed = false;  // --window-shot not written: exit 1
   float exposure_ambient = float(options.ambient);
+  float exposure_ui = float(options.exposure);
 
   while (!glfwWindowShouldClose(window)) {
     glfwPollEvents();
@@ -184,8 +185,12 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
       options.ambient = exposure_ambient;
       if (options.Validate().ok() && cam.Validate().ok()) {
         glBindFramebuffer(GL_FRAMEBUFFER, 0);
-        glEnable(GL_FRAMEBUFFER_SRGB);  // linear radiance -> sRGB on write
-        stats = (*renderer)->Draw(cam, g.lights, options);
+        // The display values (the screenshots' tone curve), encoded to sRGB on write.
+        RenderOptions window_options = options;
+        window_options.display_output = true;
+        window_options.exposure = exposure_ui;
+        glEnable(GL_FRAMEBUFFER_SRGB);
+        stats = (*renderer)->Draw(cam, g.lights, window_options);
         glDisable(GL_FRAMEBUFFER_SRGB);
       }
     }
@@ -252,9 +257,11 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui::Checkbox("bump slab search", &options.bump_slab_search);
     ImGui::SliderInt("bump parallax steps", &options.bump_parallax_iterations, 0, 8);
     ImGui::Checkbox("relief self-shadowing", &options.shadows);
+    ImGui::Checkbox("prefiltered reflectance", &options.filter_reflectance);
     ImGui::Checkbox("box overlay", &options.show_boxes);
     ImGui::Checkbox("alpha heat map", &options.alpha_heatmap);
     ImGui::SliderFloat("ambient", &exposure_ambient, 0.0f, 0.5f);
+    ImGui::SliderFloat("exposure", &exposure_ui, 0.25f, 4.0f, "%.2f", ImGuiSliderFlags_Logarithmic);
     for (size_t i = 0; i < g.lights.size(); ++i) {
       ImGui::PushID(int(i));
       float pos[3] = {float(g.lights[i].position_mm.x()), float(g.lights[i].position_mm.y()),
@@ -344,10 +351,13 @@ int main(int argc, char** argv) {
                  "light/specular: the light's elevation above the painting, deg");
   app.add_option("--raking-azimuth", raking_azimuth, "raking: azimuth, deg (180 = from the left)");
   app.add_option("--raking-elevation", raking_elevation, "raking: elevation, deg");
-  bool heatmap = false, show_boxes = false, shadows = false;
+  bool heatmap = false, show_boxes = false, shadows = false, point_sampled = false;
   app.add_flag("--heatmap", heatmap, "colour relief by its box's alpha (blue 0 .. red 1)");
   app.add_flag("--show-boxes", show_boxes, "outline the boxes drawn");
   app.add_flag("--shadows", shadows, "relief self-shadowing");
+  app.add_flag("--point-sampled", point_sampled,
+               "one texel per pixel even where a pixel covers several (no prefiltered "
+               "reflectance: far views alias, as the Embree reference)");
   app.add_option("--window-frames", window_frames, "window: close after this many frames (tests)");
   app.add_option("--window-shot", window_shot,
                  "window: write the last frame (panel included) here (.png, .jpg, .tif, .exr)");
@@ -389,6 +399,7 @@ int main(int argc, char** argv) {
   options.alpha_heatmap = heatmap;
   options.show_boxes = show_boxes;
   options.shadows = shadows;
+  options.filter_reflectance = !point_sampled;
 
   if (paths.empty() && !synthetic) {
     std::fprintf(stderr,

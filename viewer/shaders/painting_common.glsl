@@ -26,6 +26,20 @@ uniform int u_mode;             // 0 shaded, 1 specular enhancement, 2 normals (
 uniform vec3 u_specular;        // specular enhancement: diffuse scale, gain, sharpening
 uniform vec3 u_ggx_limits;      // ggx.h: kGgxMinAlpha, kGgxMaxAlpha, kGgxMinCos
 uniform float u_max_brdf;       // lafortune.h: kMaxBrdf
+// Prefiltered reflectance: shading_pyramid.h's channels, its levels 1.. stacked in one texture
+// each (level l's row 0 at u_level_row[l]; renderer.cpp's MakeLevelAtlas).
+layout(binding = 4) uniform sampler2D u_f_diffuse;    // (w rho_d, w)
+layout(binding = 5) uniform sampler2D u_f_lafortune;  // (w_l rho_s, w_l)
+layout(binding = 6) uniform sampler2D u_f_lobe;       // w_l (cx, cy, cz, k)
+layout(binding = 7) uniform sampler2D u_f_ggx;        // (w_g F0, w_g)
+layout(binding = 8) uniform sampler2D u_f_normal;     // (w n, w_g alpha^2)
+uniform int u_levels;              // the pyramid's levels, level 0 included
+uniform int u_level_row[16];
+uniform int u_filter_max_samples;  // shading samples per pixel, at most
+uniform float u_pixel_scale;       // a pixel's size at unit depth: 2 tan(fov / 2) / height
+uniform vec3 u_cam_right;          // the camera's axes, canvas frame (x right, y down, z ahead)
+uniform vec3 u_cam_down;
+uniform vec3 u_cam_forward;
 const float kPi = 3.14159265358979323846;
 
 // Canvas XY (mm) -> texture coordinates: texel (x, y) centre at X = (x + 0.5) pitch,
@@ -75,16 +89,91 @@ vec3 GgxSpecular(vec3 f0, float alpha, vec3 v, vec3 l) {
   return fresnel * (d * g1v * g1l / (4.0 * nv * nl));
 }
 
-// Radiance leaving canvas point p (mm) towards the eye: relight.h's shading, per light; or the
-// view mode's look of it (u_mode).
-vec3 Shade(vec3 p) {
-  vec2 uv = UvOf(p.xy);
+// What the shading reads at a surface point: one texel's reflectance (the reference's), or the
+// mean over a pixel's footprint, each model weighed by its share of the texels.
+struct Surface {
+  float coverage;   // shaded share (0: relit black)
+  vec3 n;           // unit shading normal
+  float cos_scale;  // the diffuse cosine's factor: |mean normal| (1 for one texel)
+  vec3 rho_d;
+  float w_laf;      // Lafortune share: rho_s, c = (cx, cy, cz, k)
+  vec3 rho_s;
+  vec4 c;
+  float w_ggx;      // GGX share: F0, alpha
+  vec3 f0;
+  float alpha;
+};
+
+Surface PointSurface(vec2 xy) {
+  Surface s;
+  vec2 uv = UvOf(xy);
   ivec2 t = clamp(ivec2(floor(uv * vec2(u_texels))), ivec2(0), u_texels - 1);
   vec4 rd = texelFetch(u_rho_d, t, 0);
-  if (rd.a < 0.5) return vec3(0.0);
+  s.coverage = rd.a < 0.5 ? 0.0 : 1.0;
   vec3 n = textureLod(u_surface, uv, 0.0).xyz;
   float len = length(n);
-  n = len > 1e-12 ? n / len : vec3(0.0, 0.0, 1.0);
+  s.n = len > 1e-12 ? n / len : vec3(0.0, 0.0, 1.0);
+  s.cos_scale = 1.0;
+  s.rho_d = rd.rgb;
+  vec4 rs = texelFetch(u_rho_s, t, 0);
+  vec4 c = texelFetch(u_lobe, t, 0);
+  bool ggx = rs.a > 0.5;
+  s.w_laf = ggx ? 0.0 : 1.0;
+  s.w_ggx = ggx ? 1.0 : 0.0;
+  s.rho_s = rs.rgb;
+  s.c = c;
+  s.f0 = rs.rgb;
+  s.alpha = c.w;
+  return s;
+}
+
+// Level `level` >= 1's texel under xy as a surface: the exact mean of the 2^level x 2^level
+// texels it covers (the reference's reflectance is constant over a texel), each model's
+// parameters averaged over its own texels; the normals' spread (1 - |mean n|) widens the lobes
+// (Toksvig).
+Surface LevelSurface(vec2 xy, int level) {
+  Surface s;
+  ivec2 size = max(u_texels >> level, ivec2(1));
+  ivec2 t = clamp(ivec2(floor(UvOf(xy) * vec2(size))), ivec2(0), size - 1) +
+            ivec2(0, u_level_row[level]);
+  vec4 fd = texelFetch(u_f_diffuse, t, 0);
+  s.coverage = clamp(fd.a, 0.0, 1.0);
+  if (fd.a < 1e-4) {
+    s.coverage = 0.0;
+    return s;
+  }
+  vec4 fn = texelFetch(u_f_normal, t, 0);
+  vec4 fl = texelFetch(u_f_lafortune, t, 0);
+  vec4 fc = texelFetch(u_f_lobe, t, 0);
+  vec4 fg = texelFetch(u_f_ggx, t, 0);
+  vec3 mean_n = fn.xyz / fd.a;
+  float len = length(mean_n);
+  s.n = len > 1e-6 ? mean_n / len : vec3(0.0, 0.0, 1.0);
+  len = clamp(len, 1e-3, 1.0);
+  s.cos_scale = len;
+  float spread = (1.0 - len) / len;
+  s.rho_d = fd.rgb / fd.a;
+  s.w_laf = clamp(fl.a / fd.a, 0.0, 1.0);
+  s.w_ggx = clamp(fg.a / fd.a, 0.0, 1.0);
+  s.rho_s = vec3(0.0);
+  s.c = vec4(0.0, 0.0, 1.0, 0.0);
+  if (fl.a > 1e-6) {
+    vec4 c = fc / fl.a;
+    float k = max(c.w, 0.0);
+    float k_wide = k / (1.0 + k * spread);
+    s.c = vec4(c.xyz, k_wide);
+    s.rho_s = fl.rgb / fl.a * ((k_wide + 2.0) / (k + 2.0));
+  }
+  s.f0 = fg.a > 1e-6 ? fg.rgb / fg.a : vec3(0.0);
+  s.alpha = fg.a > 1e-6 ? sqrt(max(fn.w / fg.a, 0.0) + spread) : 1.0;
+  return s;
+}
+
+// Radiance leaving canvas point p (mm) towards the eye for the surface `s` there: relight.h's
+// shading, per light; or the view mode's look of it (u_mode).
+vec3 ShadeSurface(vec3 p, Surface s) {
+  if (s.coverage <= 0.0) return vec3(0.0);
+  vec3 n = s.n;
   if (u_mode == 2) return n * 0.5 + 0.5;
   // Tangent frame as tangent_frame.h: x = canvas X made perpendicular to n.
   vec3 axis = vec3(1.0, 0.0, 0.0);
@@ -94,26 +183,23 @@ vec3 Shade(vec3 p) {
   vec3 ty = cross(n, tx);
   vec3 vw = normalize(u_eye - p);
   vec3 v = vec3(dot(tx, vw), dot(ty, vw), dot(n, vw));
-  vec4 rs = texelFetch(u_rho_s, t, 0);
-  vec4 c = texelFetch(u_lobe, t, 0);
-  bool ggx = rs.a > 0.5;
-  vec3 diffuse = rd.rgb;
-  vec3 spec = rs.rgb;
-  float lobe_k = c.w;
+  vec3 diffuse = s.rho_d;
+  vec3 spec = s.rho_s;
+  vec3 f0 = s.f0;
+  float lobe_k = s.c.w;
+  float alpha_in = s.alpha;
   if (u_mode == 1) {
     // Specular enhancement: grey, dimmed diffuse; the specular term brightened and sharpened.
-    diffuse = vec3(dot(rd.rgb, vec3(0.2126, 0.7152, 0.0722)) * u_specular.x);
-    if (ggx) {
-      lobe_k = max(c.w / u_specular.z, u_ggx_limits.x);
-      spec = rs.rgb * u_specular.y;
-    } else {
-      lobe_k = c.w * u_specular.z;
-      spec = rs.rgb * (u_specular.y * (lobe_k + 2.0) / (c.w + 2.0));
-    }
+    diffuse = vec3(dot(s.rho_d, vec3(0.2126, 0.7152, 0.0722)) * u_specular.x);
+    alpha_in = max(s.alpha / u_specular.z, u_ggx_limits.x);
+    f0 = s.f0 * u_specular.y;
+    lobe_k = s.c.w * u_specular.z;
+    spec = s.rho_s * (u_specular.y * (lobe_k + 2.0) / (s.c.w + 2.0));
   }
   vec3 sum = u_ambient * diffuse;
-  if (v.z <= 0.0) return sum;
-  float alpha = clamp(lobe_k, u_ggx_limits.x, u_ggx_limits.y);
+  if (v.z <= 0.0) return sum * s.coverage;
+  float alpha = clamp(alpha_in, u_ggx_limits.x, u_ggx_limits.y);
+  vec3 diffuse_cos = diffuse * s.cos_scale;
   for (int i = 0; i < u_num_lights; ++i) {
     vec3 lw;
     vec3 e;
@@ -132,15 +218,85 @@ vec3 Shade(vec3 p) {
     vec3 l = vec3(dot(tx, lw), dot(ty, lw), dot(n, lw));
     if (l.z <= 0.0) continue;
     if (u_shadows != 0 && Shadowed(p, lw, dist)) continue;
-    vec3 f;
-    if (ggx) {
-      f = min(diffuse + GgxSpecular(spec, alpha, v, l), vec3(u_max_brdf));
-    } else {
-      float base = c.x * v.x * l.x + c.y * v.y * l.y + c.z * v.z * l.z;
+    vec3 f = diffuse_cos;
+    if (s.w_ggx > 0.0) f += s.w_ggx * GgxSpecular(f0, alpha, v, l);
+    if (s.w_laf > 0.0) {
+      float base = s.c.x * v.x * l.x + s.c.y * v.y * l.y + s.c.z * v.z * l.z;
       float lobe = base > 1e-20 ? exp(min(lobe_k * log(base), 80.0)) : 0.0;
-      f = min(diffuse + spec * lobe, vec3(u_max_brdf));
+      f += s.w_laf * spec * lobe;
     }
-    sum += f * l.z * e;
+    sum += min(f, vec3(u_max_brdf)) * l.z * e;
   }
-  return sum;
+  return sum * s.coverage;
+}
+
+// The pixel's footprint through p on the plane z = p.z: the ellipse (axes a >= b, mm, major
+// direction e1) of the pixel's square, from the camera's axes. false where the view ray runs
+// along the plane (no bounded footprint).
+bool Footprint(vec3 p, out float a, out float b, out vec2 e1) {
+  vec3 dp = p - u_eye;
+  float z = dot(dp, u_cam_forward);
+  if (!(z > 1e-6)) return false;
+  vec3 dir = dp / z;  // the ray at unit depth
+  if (abs(dir.z) < 1e-6) return false;
+  float size = u_pixel_scale * z;
+  // Moving the pixel by one along an image axis moves the ray's point on the plane by:
+  vec2 fx = size * (u_cam_right - dir * (u_cam_right.z / dir.z)).xy;
+  vec2 fy = size * (u_cam_down - dir * (u_cam_down.z / dir.z)).xy;
+  float m00 = fx.x * fx.x + fy.x * fy.x;
+  float m01 = fx.x * fx.y + fy.x * fy.y;
+  float m11 = fx.y * fx.y + fy.y * fy.y;
+  float half_tr = 0.5 * (m00 + m11);
+  float disc = sqrt(max(half_tr * half_tr - (m00 * m11 - m01 * m01), 0.0));
+  float l1 = half_tr + disc;
+  a = sqrt(l1);
+  b = sqrt(max(half_tr - disc, 0.0));
+  e1 = abs(m01) > 1e-12 * l1 ? normalize(vec2(m01, l1 - m00))
+                             : (m00 >= m11 ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
+  return a == a && b == b;
+}
+
+// Radiance leaving canvas point p towards the eye: the texel's shading where a pixel covers at
+// most a texel (the reference's), the footprint's mean where it covers more (renderer.h). The
+// filter is compiled in (DIGITIZE_FILTER) only in the programs drawn where some pixel may cover
+// more than a texel: present but unused, it slows llvmpipe's other frames by ~30 %.
+vec3 Shade(vec3 p) {
+  vec3 point_radiance = ShadeSurface(p, PointSurface(p.xy));
+#ifdef DIGITIZE_FILTER
+  float a, b;
+  vec2 e1;
+  if (!Footprint(p, a, b, e1) || a <= u_pitch_mm) return point_radiance;
+  // Shading samples on an n_major x n_minor grid over the footprint, at most
+  // u_filter_max_samples, each the surface of the level whose texel is about the sample's share
+  // of the footprint (level 0: the texel itself, as the reference).
+  int max_n = max(u_filter_max_samples, 1);
+  float share_texels = sqrt(a * b / float(max_n)) / u_pitch_mm;
+  int level = clamp(int(floor(log2(max(share_texels, 1.0)))), 0, u_levels - 1);
+  float texel_mm = u_pitch_mm * exp2(float(level));
+  int n_major = clamp(int(ceil(a / texel_mm)), 1, max_n);
+  int n_minor = clamp(int(ceil(b / texel_mm)), 1, max(1, max_n / n_major));
+  vec2 e2 = vec2(-e1.y, e1.x);
+  vec3 sum = vec3(0.0);
+  float total = 0.0;
+  for (int i = 0; i < n_major; ++i) {
+    for (int j = 0; j < n_minor; ++j) {
+      vec2 q = p.xy + e1 * (a * ((float(i) + 0.5) / float(n_major) - 0.5)) +
+               e2 * (b * ((float(j) + 0.5) / float(n_minor) - 0.5));
+      if (any(lessThan(q, vec2(0.0))) || any(greaterThan(q, u_size_mm))) continue;
+      vec3 qs = vec3(q, p.z);
+      Surface s = level == 0 ? PointSurface(q) : LevelSurface(q, level);
+      // A sample stands for a patch of the plane; the pixel sees that patch of the relief by its
+      // projected area, (n . v) / n_z of the plane's: at grazing views a slope facing the eye
+      // fills more of the pixel than one facing away.
+      float weight = max(dot(s.n, normalize(u_eye - qs)), 0.0) / max(s.n.z, 0.05);
+      sum += weight * ShadeSurface(qs, s);
+      total += weight;
+    }
+  }
+  if (!(total > 0.0)) return point_radiance;
+  // From 1 to 2 texels across, blended into the point-sampled radiance: no seam where it starts.
+  return mix(point_radiance, sum / total, clamp(a / u_pitch_mm - 1.0, 0.0, 1.0));
+#else
+  return point_radiance;
+#endif
 }

@@ -12,5 +12,5 @@ void main() {
   float bristle = 0.85 + 0.15 * sin(v_local.y * 9.0 + v_seed * 40.0);
   float a = edge * taper;
   if (a <= 0.01) discard;
-  o_color = vec4(Linear(clamp(v_colour * bristle, 0.0, 1.0)), a);
+  o_color = vec4(Output(clamp(v_colour * bristle, 0.0, 1.0)), a);
 }

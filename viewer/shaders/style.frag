@@ -83,13 +83,14 @@ void main() {
   vec2 inv = 1.0 / vec2(textureSize(u_colour, 0));
   float depth = texture(u_depth, frag * inv).r;
   vec3 lin = texture(u_colour, frag * inv).rgb;
-  if (depth >= 1.0) { o_color = vec4(lin, 1.0); return; }  // nothing drawn: as rendered
+  if (depth >= 1.0) { o_color = vec4(u_display_out != 0 ? Display(lin) : lin, 1.0); return; }
   vec3 p = WorldAt(frag, depth);
   vec3 c = Display(lin);
+  if (u_style == 0) { o_color = vec4(Output(c), 1.0); return; }  // realistic: the tone curve only
   float y = dot(c, kLuma);
   // The noise cube only where it is used (four trilinear 3D lookups: most of this pass's cost).
   vec4 t = u_style <= 3 || u_debug != 0 ? DynamicSolid(p) : vec4(0.5);
-  if (u_debug != 0) { o_color = vec4(Linear(vec3(t.r)), 1.0); return; }
+  if (u_debug != 0) { o_color = vec4(Output(vec3(t.r)), 1.0); return; }
   vec3 outc = c;
   if (u_style == 1) {  // watercolor
     vec2 wobble = (t.ab - 0.5) * 5.0;  // px
@@ -130,5 +131,5 @@ void main() {
     float need = clamp(1.0 - Drawn(y), 0.0, 1.0);
     outc = kPaper * (1.0 - clamp(mix(Hatch(uv, need), Hatch(0.5 * uv, need), s), 0.0, 1.0));
   }
-  o_color = vec4(Linear(outc), 1.0);
+  o_color = vec4(Output(outc), 1.0);
 }

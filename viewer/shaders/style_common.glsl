@@ -15,6 +15,8 @@ vec3 Display(vec3 c) {
   }
   return clamp(c, 0.0, 1.0);
 }
+uniform int u_display_out;  // 1: write display values (the window's sRGB framebuffer encodes them)
+// Inverse of Display: the linear radiance whose display value is d.
 vec3 Linear(vec3 d) {
   d = clamp(d, 0.0, 1.0);
   float m = min(max(d.r, max(d.g, d.b)), 0.995);
@@ -26,3 +28,7 @@ vec3 Linear(vec3 d) {
   return c / u_exposure;
 }
 
+
+// What a pass writes for display value d: d itself for the window, else its linear radiance (the
+// caller tone-maps it again: ToneMap).
+vec3 Output(vec3 d) { return u_display_out != 0 ? d : Linear(d); }

@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <utility>
 
 namespace digitize::viewer {
 
@@ -37,6 +39,30 @@ Result<PaintingSetup> PreparePainting(const Pack& pack, const std::string& name)
     p.box_tops.emplace_back(xy.x(), xy.y(), b.h_max_mm);
   }
   return p;
+}
+
+std::vector<size_t> ShadingSource(const Pack& pack) {
+  const int w = pack.width(), h = pack.height();
+  std::vector<size_t> source(size_t(w) * h, SIZE_MAX), queue;
+  for (size_t i = 0; i < source.size(); ++i) {
+    if (pack.field.state.data[i] != TexelState::kOutside &&
+        pack.maps.status.data[i] != TexelFitStatus::kTooFewSamples) {
+      source[i] = i;
+      queue.push_back(i);
+    }
+  }
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const size_t i = queue[head];
+    const int x = int(i % w), y = int(i / w);
+    for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+      if (x + dx < 0 || x + dx >= w || y + dy < 0 || y + dy >= h) continue;
+      const size_t j = size_t(y + dy) * w + (x + dx);
+      if (source[j] != SIZE_MAX) continue;
+      source[j] = source[i];
+      queue.push_back(j);
+    }
+  }
+  return source;
 }
 
 GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& packs,

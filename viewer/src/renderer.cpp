@@ -8,9 +8,12 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
+#include <string>
 
 #include "digitize_viewer/painterly_strokes.h"
 #include "digitize_viewer/painting_setup.h"
+#include "digitize_viewer/shading_pyramid.h"
 #include "digitize_viewer/tonal_art_map.h"
 #include "embedded_shaders.h"
 #include "height_mesh.h"
@@ -45,40 +48,21 @@ Mat4d ClipFromWorld(const ViewCamera& view) {
   return p * Homogeneous(cam.camera_from_scan);
 }
 
-// For each texel, the texel whose reflectance it is shaded with: itself when it is inside the
-// canvas and was fitted, else the nearest such texel (4-connected, breadth first). The bump
-// plane and the mesh cover the whole grid rectangle, so texels outside the mask's jagged outline,
-// or fitted from too few samples (zero maps), would otherwise be relit black: a black outline
-// round every scanned canvas. SIZE_MAX everywhere when no texel was fitted.
-std::vector<size_t> ShadingSource(const Pack& pack) {
-  const int w = pack.width(), h = pack.height();
-  std::vector<size_t> source(size_t(w) * h, SIZE_MAX), queue;
-  for (size_t i = 0; i < source.size(); ++i) {
-    if (pack.field.state.data[i] != TexelState::kOutside &&
-        pack.maps.status.data[i] != TexelFitStatus::kTooFewSamples) {
-      source[i] = i;
-      queue.push_back(i);
-    }
-  }
-  for (size_t head = 0; head < queue.size(); ++head) {
-    const size_t i = queue[head];
-    const int x = int(i % w), y = int(i / w);
-    for (const auto& [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-      if (x + dx < 0 || x + dx >= w || y + dy < 0 || y + dy >= h) continue;
-      const size_t j = size_t(y + dy) * w + (x + dx);
-      if (source[j] != SIZE_MAX) continue;
-      source[j] = source[i];
-      queue.push_back(j);
-    }
-  }
-  return source;
-}
-
 // The log's "S:L(C)" positions name a GLSL source string S, which the program's legend maps to its
 // file in viewer/shaders/ (embed_shaders.cmake numbers them), hence the legend in the message.
-Result<GLuint> Compile(GLenum type, const shaders::Source& source, const char* what) {
+Result<GLuint> Compile(GLenum type, const shaders::Source& source, const char* what,
+                       const char* define = nullptr) {
+  // A define goes right after the #version line (the #line that follows keeps the log's line
+  // numbers).
+  std::string text = source.text;
+  if (define) {
+    const size_t version = text.find("#version");
+    const size_t eol = version == std::string::npos ? std::string::npos : text.find('\n', version);
+    if (eol != std::string::npos) text.insert(eol + 1, std::string("#define ") + define + "\n");
+  }
+  const char* c_text = text.c_str();
   const GLuint s = glCreateShader(type);
-  glShaderSource(s, 1, &source.text, nullptr);
+  glShaderSource(s, 1, &c_text, nullptr);
   glCompileShader(s);
   GLint ok = 0;
   glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
@@ -92,10 +76,11 @@ Result<GLuint> Compile(GLenum type, const shaders::Source& source, const char* w
   return s;
 }
 
-Result<GLuint> Link(const shaders::Source& vs, const shaders::Source& fs, const char* what) {
+Result<GLuint> Link(const shaders::Source& vs, const shaders::Source& fs, const char* what,
+                    const char* fragment_define = nullptr) {
   auto v = Compile(GL_VERTEX_SHADER, vs, what);
   if (!v) return v.error();
-  auto f = Compile(GL_FRAGMENT_SHADER, fs, what);
+  auto f = Compile(GL_FRAGMENT_SHADER, fs, what, fragment_define);
   if (!f) {
     glDeleteShader(*v);
     return f.error();
@@ -170,6 +155,81 @@ GLuint MakeTexture(int w, int h, const std::vector<float>& rgba, bool linear) {
   return t;
 }
 
+// The largest footprint (major axis, texels) of a pixel on the part of the canvas in view: the
+// shader's Footprint where the rays of a 17 x 17 grid over the image meet the canvas planes z = 0
+// and z = top (inside the canvas), x 1.25 for the pixels between: whether the filtered programs
+// are needed. Parts out of view do not count (a close-up's far corner would otherwise switch the
+// whole frame to the filtered programs). Infinite when a ray runs along the canvas.
+double MaxFootprintTexels(double width_mm, double height_mm, double pitch_mm, double top_mm,
+                          const Vec3d& eye, const Mat3d& canvas_from_camera,
+                          const ViewCamera& camera) {
+  const double tan_half = std::tan(camera.fov_y_deg * kPi / 360);
+  const double scale = 2 * tan_half / std::max(camera.height, 1);
+  const double aspect = double(camera.width) / std::max(camera.height, 1);
+  const Vec3d right = canvas_from_camera.col(0), down = canvas_from_camera.col(1),
+              forward = canvas_from_camera.col(2);
+  double worst = 0;
+  constexpr int kGrid = 16;
+  for (int iy = 0; iy <= kGrid; ++iy)
+    for (int ix = 0; ix <= kGrid; ++ix) {
+      const Vec3d dir = forward + (2.0 * ix / kGrid - 1) * tan_half * aspect * right +
+                        (2.0 * iy / kGrid - 1) * tan_half * down;  // unit depth
+      if (std::abs(dir.z()) < 1e-9) continue;
+      for (double z : {0.0, top_mm}) {
+        const double depth = (z - eye.z()) / dir.z();
+        if (!(depth > 1e-6)) continue;
+        const Vec3d p = eye + depth * dir;
+        if (p.x() < -pitch_mm || p.y() < -pitch_mm || p.x() > width_mm + pitch_mm ||
+            p.y() > height_mm + pitch_mm)
+          continue;
+        if (std::abs(dir.z()) < 1e-6) return std::numeric_limits<double>::infinity();
+        const Eigen::Vector2d fx =
+            (scale * depth * (right - dir * (right.z() / dir.z()))).head<2>();
+        const Eigen::Vector2d fy = (scale * depth * (down - dir * (down.z() / dir.z()))).head<2>();
+        const Eigen::Matrix2d m = fx * fx.transpose() + fy * fy.transpose();
+        const double half_trace = 0.5 * m.trace();
+        const double l1 =
+            half_trace + std::sqrt(std::max(half_trace * half_trace - m.determinant(), 0.0));
+        worst = std::max(worst, std::sqrt(l1));
+      }
+    }
+  return 1.25 * worst / pitch_mm;
+}
+
+// Levels the shader can address (u_level_row's size): 2^15 texels across.
+constexpr int kMaxShadingLevels = 16;
+
+// The pyramid's levels 1.. of one channel in one texture, stacked downwards from the top-left
+// corner (level l's row 0 at `rows[l]`), read with texelFetch at lod 0. Not a GL mip chain: a
+// per-pixel level that differs within a 2 x 2 pixel quad is fetched at the quad's level on
+// llvmpipe. Half floats but for the lobe (k is not bounded by the format); the other values are
+// finite and far below half's range (pack.h's bounds). `rows` gets one entry per level (0 for 0).
+GLuint MakeLevelAtlas(const ShadingPyramid& pyramid, int channel, std::vector<int>* rows) {
+  const int width = pyramid.levels.size() > 1 ? pyramid.levels[1].width : 1;
+  int height = 0;
+  rows->assign(1, 0);
+  for (size_t l = 1; l < pyramid.levels.size(); ++l) {
+    rows->push_back(height);
+    height += pyramid.levels[l].height;
+  }
+  height = std::max(height, 1);
+  GLuint t = 0;
+  glCreateTextures(GL_TEXTURE_2D, 1, &t);
+  glTextureStorage2D(t, 1, channel == kLobe ? GL_RGBA32F : GL_RGBA16F, width, height);
+  const std::vector<float> zeros(size_t(width) * height * 4, 0.0f);
+  glTextureSubImage2D(t, 0, 0, 0, width, height, GL_RGBA, GL_FLOAT, zeros.data());
+  for (size_t l = 1; l < pyramid.levels.size(); ++l) {
+    const ShadingLevel& level = pyramid.levels[l];
+    glTextureSubImage2D(t, 0, 0, (*rows)[l], level.width, level.height, GL_RGBA, GL_FLOAT,
+                        level.rgba[channel].data());
+  }
+  glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  return t;
+}
+
 struct Painting {
   std::string name;
   RigidTransform world_from_canvas;
@@ -179,6 +239,8 @@ struct Painting {
   std::vector<ReliefBox> boxes;
   std::vector<Vec3d> box_top;  // I per box, canvas frame
   GLuint textures[4] = {0, 0, 0, 0};
+  GLuint filtered[kShadingChannels] = {};  // shading_pyramid.h's channels, levels 1.. (atlas)
+  std::vector<int> level_rows;             // each level's first row in the atlases
   // Mesh, built on first use (decimation can take seconds).
   MeshOptions mesh_options;
   HeightField field;  // kept for the mesh only until it is built
@@ -274,6 +336,9 @@ Status RenderOptions::Validate() const {
   if (!finite(eps_min) || !finite(eps_max) || eps_min < 0 || eps_max <= eps_min)
     return Error{"need 0 <= eps_min < eps_max, got " + FormatNumber(eps_min) + ", " +
                  FormatNumber(eps_max)};
+  if (filter_max_samples < 1 || filter_max_samples > 64)
+    return Error{"filter_max_samples must be in [1, 64], got " +
+                 std::to_string(filter_max_samples)};
   if (!finite(max_error_px) || max_error_px <= 0)
     return Error{"max_error_px must be > 0, got " + FormatNumber(max_error_px)};
   if (!finite(linear_step_texels) || linear_step_texels <= 0)
@@ -310,6 +375,8 @@ Status RenderOptions::Validate() const {
 
 struct Renderer::Impl {
   GLuint plane_program = 0, box_program = 0, mesh_program = 0, scene_program = 0;
+  // The painting programs with the prefiltered reflectance compiled in (DIGITIZE_FILTER).
+  GLuint plane_filtered = 0, box_filtered = 0, mesh_filtered = 0;
   GLuint style_program = 0, stroke_program = 0;
   GLuint stroke_vao = 0, stroke_vbo = 0;
   std::vector<StrokeFace> room_faces;  // the room's boxes, for the painterly strokes
@@ -335,14 +402,15 @@ struct Renderer::Impl {
   ~Impl() {
     for (Painting& p : paintings) {
       glDeleteTextures(4, p.textures);
+      glDeleteTextures(kShadingChannels, p.filtered);
       if (p.mesh_built) {
         glDeleteVertexArrays(1, &p.mesh_vao);
         glDeleteBuffers(1, &p.mesh_vbo);
         glDeleteBuffers(1, &p.mesh_ibo);
       }
     }
-    for (GLuint prog :
-         {plane_program, box_program, mesh_program, scene_program, style_program, stroke_program})
+    for (GLuint prog : {plane_program, box_program, mesh_program, scene_program, style_program,
+                        stroke_program, plane_filtered, box_filtered, mesh_filtered})
       if (prog) glDeleteProgram(prog);
     if (stroke_vao) glDeleteVertexArrays(1, &stroke_vao);
     if (stroke_vbo) glDeleteBuffers(1, &stroke_vbo);
@@ -498,6 +566,18 @@ Result<std::unique_ptr<Renderer>> Renderer::Create() {
   auto mesh = Link(shaders::kMeshVertex, shaders::kMeshFragment, "mesh");
   if (!mesh) return mesh.error();
   m.mesh_program = *mesh;
+  auto plane_f = Link(shaders::kPlaneVertex, shaders::kPlaneFragment, "bump plane (filtered)",
+                      "DIGITIZE_FILTER");
+  if (!plane_f) return plane_f.error();
+  m.plane_filtered = *plane_f;
+  auto box_f =
+      Link(shaders::kBoxVertex, shaders::kBoxFragment, "relief box (filtered)", "DIGITIZE_FILTER");
+  if (!box_f) return box_f.error();
+  m.box_filtered = *box_f;
+  auto mesh_f =
+      Link(shaders::kMeshVertex, shaders::kMeshFragment, "mesh (filtered)", "DIGITIZE_FILTER");
+  if (!mesh_f) return mesh_f.error();
+  m.mesh_filtered = *mesh_f;
   auto scene = Link(shaders::kSceneVertex, shaders::kSceneFragment, "scene");
   if (!scene) return scene.error();
   m.scene_program = *scene;
@@ -607,10 +687,14 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
   p.textures[1] = MakeTexture(w, h, rho_d, false);
   p.textures[2] = MakeTexture(w, h, rho_s, false);
   p.textures[3] = MakeTexture(w, h, lobe, false);
+  const ShadingPyramid pyramid = BuildShadingPyramid(pack, source);
+  for (int c = 0; c < kShadingChannels; ++c)
+    p.filtered[c] = MakeLevelAtlas(pyramid, c, &p.level_rows);
   p.mesh_options = mesh;
   p.field = pack.field;
   if (GLenum e = glGetError(); e != GL_NO_ERROR) {
     glDeleteTextures(4, p.textures);
+    glDeleteTextures(kShadingChannels, p.filtered);
     return fail("OpenGL error " + std::to_string(e) + " while uploading the textures");
   }
   impl_->paintings.push_back(std::move(p));
@@ -677,7 +761,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
   Impl& m = *impl_;
   FrameStats stats;
   // A style draws the realistic frame into its own target first, then into the caller's.
-  const bool styled = options.style != Style::kRealistic;
+  const bool styled = options.style != Style::kRealistic || options.display_output;
   GLint caller_fbo = 0;
   if (styled) {
     glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &caller_fbo);
@@ -773,6 +857,12 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     const Mat4d clip_from_canvas = clip_from_world * Homogeneous(p.world_from_canvas);
     const Vec3f eye = canvas_from_world.Apply(camera.eye_mm).cast<float>();
     for (int k = 0; k < 4; ++k) glBindTextureUnit(k, p.textures[k]);
+    for (int k = 0; k < kShadingChannels; ++k) glBindTextureUnit(4 + k, p.filtered[k]);
+    const Mat3d canvas_from_camera =
+        canvas_from_world.rotation * ToCamera(camera).camera_from_scan.rotation.transpose();
+    const Vec3f cam_right = canvas_from_camera.col(0).cast<float>();
+    const Vec3f cam_down = canvas_from_camera.col(1).cast<float>();
+    const Vec3f cam_forward = canvas_from_camera.col(2).cast<float>();
     auto set_common = [&](GLuint prog) {
       glUseProgram(prog);
       set_mat(prog, "u_clip_from_canvas", clip_from_canvas);
@@ -807,23 +897,42 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glProgramUniform3f(prog, glGetUniformLocation(prog, "u_ggx_limits"), kGgxMinAlpha,
                          kGgxMaxAlpha, kGgxMinCos);
       glProgramUniform1f(prog, glGetUniformLocation(prog, "u_max_brdf"), kMaxBrdf);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_filter_max_samples"),
+                         options.filter_max_samples);
+      glProgramUniform1f(
+          prog, glGetUniformLocation(prog, "u_pixel_scale"),
+          float(2 * std::tan(camera.fov_y_deg * kPi / 360) / std::max(camera.height, 1)));
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_cam_right"), 1, cam_right.data());
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_cam_down"), 1, cam_down.data());
+      glProgramUniform3fv(prog, glGetUniformLocation(prog, "u_cam_forward"), 1, cam_forward.data());
+      const int levels = std::min(int(p.level_rows.size()), kMaxShadingLevels);
+      glProgramUniform1i(prog, glGetUniformLocation(prog, "u_levels"), levels);
+      glProgramUniform1iv(prog, glGetUniformLocation(prog, "u_level_row"), levels,
+                          p.level_rows.data());
     };
+    // The filtered programs only where some pixel may cover more than a texel.
+    const bool filter = options.filter_reflectance &&
+                        MaxFootprintTexels(p.width_mm, p.height_mm, p.pitch_mm, p.max_height_mm,
+                                           eye.cast<double>(), canvas_from_camera, camera) > 1.0;
+    const GLuint plane_prog = filter ? m.plane_filtered : m.plane_program;
+    const GLuint box_prog = filter ? m.box_filtered : m.box_program;
+    const GLuint mesh_prog = filter ? m.mesh_filtered : m.mesh_program;
+    stats.filtered_paintings += filter ? 1 : 0;
     stats.boxes_total += int(p.boxes.size());
 
     if (t == Technique::kMesh) {
       if (!p.mesh_built) m.BuildMesh(p);
-      set_common(m.mesh_program);
+      set_common(mesh_prog);
       glBindVertexArray(p.mesh_vao);
       glDrawElements(GL_TRIANGLES, GLsizei(p.mesh_triangles * 3), GL_UNSIGNED_INT, nullptr);
       stats.mesh_triangles += p.mesh_triangles;
       continue;
     }
     if (t != Technique::kReliefEverywhere) {
-      set_common(m.plane_program);
-      glProgramUniform1i(m.plane_program,
-                         glGetUniformLocation(m.plane_program, "u_parallax_iterations"),
+      set_common(plane_prog);
+      glProgramUniform1i(plane_prog, glGetUniformLocation(plane_prog, "u_parallax_iterations"),
                          options.bump_parallax_iterations);
-      const GLuint pp = m.plane_program;
+      const GLuint pp = plane_prog;
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_slab_search"),
                          options.bump_slab_search ? 1 : 0);
       glProgramUniform1f(pp, glGetUniformLocation(pp, "u_step_texels"),
@@ -835,9 +944,9 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glProgramUniform1i(pp, glGetUniformLocation(pp, "u_binary_steps"), options.bump_binary_steps);
       const Vec3f slab_min(0.0f, 0.0f, float(std::min(p.min_height_mm, p.delta0_mm)) - 1e-3f);
       const Vec3f slab_max(float(p.width_mm), float(p.height_mm), float(p.delta0_mm));
-      glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_min"), 1,
+      glProgramUniform3fv(plane_prog, glGetUniformLocation(plane_prog, "u_slab_min"), 1,
                           slab_min.data());
-      glProgramUniform3fv(m.plane_program, glGetUniformLocation(m.plane_program, "u_slab_max"), 1,
+      glProgramUniform3fv(plane_prog, glGetUniformLocation(plane_prog, "u_slab_max"), 1,
                           slab_max.data());
       glBindVertexArray(m.box_vao);  // the cube's corners; no instance attribute is read
       glEnable(GL_CULL_FACE);
@@ -875,14 +984,14 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       }
     }
     if (!inst.empty()) {
-      set_common(m.box_program);
-      glProgramUniform1f(m.box_program, glGetUniformLocation(m.box_program, "u_step_texels"),
+      set_common(box_prog);
+      glProgramUniform1f(box_prog, glGetUniformLocation(box_prog, "u_step_texels"),
                          float(options.linear_step_texels));
-      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_min_steps"),
+      glProgramUniform1i(box_prog, glGetUniformLocation(box_prog, "u_min_steps"),
                          options.min_linear_steps);
-      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_max_steps"),
+      glProgramUniform1i(box_prog, glGetUniformLocation(box_prog, "u_max_steps"),
                          options.max_linear_steps);
-      glProgramUniform1i(m.box_program, glGetUniformLocation(m.box_program, "u_binary_steps"),
+      glProgramUniform1i(box_prog, glGetUniformLocation(box_prog, "u_binary_steps"),
                          options.binary_steps);
       glNamedBufferData(m.box_instances, inst.size() * sizeof(float), inst.data(), GL_STREAM_DRAW);
       glBindVertexArray(m.box_vao);
@@ -929,6 +1038,8 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
       glProgramUniform1fv(prog, glGetUniformLocation(prog, "u_tam_ink"), GLsizei(m.tam_ink.size()),
                           m.tam_ink.data());
     glProgramUniform1i(prog, glGetUniformLocation(prog, "u_style"), int(options.style));
+    glProgramUniform1i(prog, glGetUniformLocation(prog, "u_display_out"),
+                       options.display_output ? 1 : 0);
     glProgramUniform1i(prog, glGetUniformLocation(prog, "u_debug"),
                        options.style_debug_texture ? 1 : 0);
     glBindTextureUnit(0, m.style_colour);
@@ -972,6 +1083,8 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                            float(options.stroke_fidelity));
         glProgramUniform1f(sp, glGetUniformLocation(sp, "u_exposure"), float(options.exposure));
         glProgramUniform1f(sp, glGetUniformLocation(sp, "u_knee"), float(kToneKnee));
+        glProgramUniform1i(sp, glGetUniformLocation(sp, "u_display_out"),
+                           options.display_output ? 1 : 0);
         glEnable(GL_BLEND);
         glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
         glBindVertexArray(m.stroke_vao);

@@ -34,6 +34,13 @@ struct PaintingSetup {
 // Every value of a result is finite.
 Result<PaintingSetup> PreparePainting(const Pack& pack, const std::string& name);
 
+// For each texel, the texel whose reflectance it is shaded with: itself when it is inside the
+// canvas and was fitted, else the nearest such texel (4-connected, breadth first). The bump
+// plane and the mesh cover the whole grid rectangle, so texels outside the mask's jagged outline,
+// or fitted from too few samples (zero maps), would otherwise be relit black: a black outline
+// round every scanned canvas. SIZE_MAX everywhere when no texel was fitted.
+std::vector<size_t> ShadingSource(const Pack& pack);
+
 // The gallery for `packs` (name, pack), in order: each prepared; those refused are listed (one
 // error each, naming the pack) and the others hung side by side (MakeGallery), without a gap.
 struct GalleryScene {

@@ -20,6 +20,21 @@
 //     `ambient` x rho_d (0 by default: the reference has no ambient term);
 //   - with `shadows`, a light whose ray from P is blocked by the height field contributes 0;
 //   - output: linear radiance (RGBA32F target), no tone mapping.
+//   - with filter_reflectance (default), where a pixel's footprint on the canvas spans more than
+//     a texel (far and grazing views: one texel per pixel aliases, and the image flickers as the
+//     eye moves) the pixel shades the surface under it instead of one point: the footprint is
+//     the pixel's square projected through P onto the plane z = P.z, an ellipse of axes a >= b;
+//     a grid of at most filter_max_samples samples over it, each the reflectance of one level
+//     of shading_pyramid.h's pyramid whose texel is about the sample's share of the footprint
+//     (level 0: the texel itself, as above; a coarser level: the exact mean of the texels it
+//     covers, each model's parameters averaged over its own texels, the normals' spread
+//     widening the lobes -- Toksvig: s = (1 - |mean n|) / |mean n|, Lafortune k' = k / (1 + k s)
+//     with rho_s x (k' + 2) / (k + 2) to keep its energy, GGX alpha'^2 = alpha^2 + s -- and the
+//     diffuse cosine scaled by |mean n|), shaded as above and weighted by its projected area
+//     (n.v) / n_z. From 1 to 2 texels across the result is blended into the point-sampled
+//     radiance (no seam); below 1 texel the shading is the reference's exactly. The samples lie
+//     on the plane through P, not where the pixel's other rays meet the relief: at grazing views
+//     over tall relief a sample can see a glint those rays do not (tests/viewer_test.cpp).
 // Techniques differ only in P:
 //   kBump: P = (xy, h(xy)) where xy is where the view ray meets the plane z = delta0 (the view and
 //     light vectors are "corrected by the height", paper 5.4), corrected along the ray: with
@@ -149,12 +164,20 @@ struct RenderOptions {
   int bump_min_steps = 2;
   int bump_binary_steps = 6;
   double ambient = 0;  // ambient radiance factor x rho_d (gallery look; 0 = none)
+  // Prefiltered reflectance where a pixel covers more than a texel (see SHADING above); false:
+  // one texel per pixel everywhere, as RenderRelit (aliases at far and grazing views).
+  bool filter_reflectance = true;
+  int filter_max_samples = 16;  // shading samples per pixel where it covers several texels, >= 1
   // Relief self-shadowing: per shading point and light, a march through the height field towards
   // the light (steps of linear_step_texels, at most max_linear_steps) until the ray rises above H.
   // Off by default, as in the paper; RenderRelit with shadows on is its reference.
   bool shadows = false;
   // Stylised looks (stylise.h): the realistic render redrawn by a screen pass.
   Style style = Style::kRealistic;
+  // The output: false (default) linear radiance, which screenshots tone-map (ToneMap); true the
+  // display value DisplayColour(radiance, exposure), for a framebuffer that encodes linear values
+  // to sRGB on write (the window) -- so the window shows what a screenshot does.
+  bool display_output = false;
   double exposure = 1.0;             // the display value the styles take their tone from
                                      // (DisplayColour); screenshots tone-map with the same
   double style_tile_px = 256;        // watercolor, binary, collage: the on-screen size of the solid
@@ -189,7 +212,9 @@ struct FrameStats {
   int boxes_blended = 0;      // 0 < alpha < 1
   size_t mesh_triangles = 0;  // kMesh: triangles drawn
   size_t strokes = 0;         // painterly: anchors selected (drawn unless hidden)
-  double cpu_ms = 0;          // CPU time to issue the frame (GL is asynchronous: see the bench)
+  int filtered_paintings =
+      0;              // drawn with the prefiltered reflectance (a pixel may cover > 1 texel)
+  double cpu_ms = 0;  // CPU time to issue the frame (GL is asynchronous: see the bench)
 };
 
 struct RenderedImage {
