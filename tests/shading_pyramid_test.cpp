@@ -9,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include "checker_pack.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "digitize_viewer/painting_setup.h"
@@ -111,30 +112,12 @@ TEST(ShadingPyramidTest, MeanNormalShortensWhereTheReliefBends) {
   EXPECT_LT(shortest, 0.99);  // impasto flanks somewhere
 }
 
-// A w x h pack by hand: flat, 5 mm texels, Lambertian in a checker of two greys.
-Pack HandPack(int w, int h) {
-  Pack p;
-  p.field.pitch_mm = 5.0;
-  p.field.height_mm = Grid<float>(w, h, 0.0f);
-  p.field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  p.normals = Grid<Vec3f>(w, h, Vec3f(0, 0, 1));
-  p.maps = ReflectanceMaps::Zeros(w, h);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      p.maps.rho_d(x, y) = Vec3f::Constant((x + y) % 2 ? 0.1f : 0.2f);
-      p.maps.status(x, y) = TexelFitStatus::kDiffuseOnly;
-    }
-  p.max_height_mm = 1.0;
-  p.cell_px = 16;
-  return p;
-}
-
 // Degenerate grids: the smallest pack the viewer takes (2 x 2 texels; and 3 x 2) goes down to
 // 1 x 1 holding the mean (0.15); a grid none of whose texels is shaded gives all-zero levels
 // (the shader then draws it black, as the point-sampled texels).
 TEST(ShadingPyramidTest, SmallAndUnshadedGrids) {
   for (const auto& [w, h] : {std::pair{2, 2}, std::pair{3, 2}}) {
-    const Pack small = HandPack(w, h);
+    const Pack small = FlatCheckerPack(w, h, 5.0, 0.2f, 0.1f);
     const ShadingPyramid pyr = BuildShadingPyramid(small, ShadingSource(small));
     ASSERT_EQ(pyr.levels.size(), 2u);
     EXPECT_EQ(pyr.levels[1].width, 1);

@@ -16,6 +16,7 @@
 #include <functional>
 #include <memory>
 
+#include "checker_pack.h"
 #include "digitize/image_io.h"
 #include "digitize/normals.h"
 #include "digitize/relight.h"
@@ -356,20 +357,7 @@ TEST(ViewerTest, NoPoppingAlongASlowPath) {
 // face-on, 0.014 at 60 deg, against 0.100: its pixels each pick one texel).
 TEST(ViewerTest, TinyPackThroughThePrefilteredPrograms) {
   REQUIRE_GL();
-  constexpr int w = 8, h = 6;
-  Pack tiny;
-  tiny.field.pitch_mm = 5.0;
-  tiny.field.height_mm = Grid<float>(w, h, 0.0f);
-  tiny.field.state = Grid<TexelState>(w, h, TexelState::kMeasured);
-  tiny.normals = Grid<Vec3f>(w, h, Vec3f(0, 0, 1));
-  tiny.maps = ReflectanceMaps::Zeros(w, h);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      tiny.maps.rho_d(x, y) = Vec3f::Constant((x + y) % 2 ? 0.1f : 0.3f);
-      tiny.maps.status(x, y) = TexelFitStatus::kDiffuseOnly;
-    }
-  tiny.max_height_mm = 1.0;
-  tiny.cell_px = 16;
+  const Pack tiny = FlatCheckerPack(8, 6, 5.0, 0.3f, 0.1f);
   auto renderer = Renderer::Create();
   ASSERT_TRUE(renderer.ok()) << renderer.error().message;
   ASSERT_TRUE((*renderer)->AddPainting(tiny, "tiny").ok());

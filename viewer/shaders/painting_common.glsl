@@ -261,42 +261,48 @@ bool Footprint(vec3 p, out float a, out float b, out vec2 e1) {
 // filter is compiled in (DIGITIZE_FILTER) only in the programs drawn where some pixel may cover
 // more than a texel: present but unused, it slows llvmpipe's other frames by ~30 %.
 vec3 Shade(vec3 p) {
-  vec3 point_radiance = ShadeSurface(p, PointSurface(p.xy));
+  float blend = 0.0;
+  vec3 filtered = vec3(0.0);
 #ifdef DIGITIZE_FILTER
   float a, b;
   vec2 e1;
-  if (!Footprint(p, a, b, e1) || a <= u_pitch_mm) return point_radiance;
-  // Shading samples on an n_major x n_minor grid over the footprint, at most
-  // u_filter_max_samples, each the surface of the level whose texel is about the sample's share
-  // of the footprint (level 0: the texel itself, as the reference).
-  int max_n = max(u_filter_max_samples, 1);
-  float share_texels = sqrt(a * b / float(max_n)) / u_pitch_mm;
-  int level = clamp(int(floor(log2(max(share_texels, 1.0)))), 0, u_levels - 1);
-  float texel_mm = u_pitch_mm * exp2(float(level));
-  int n_major = clamp(int(ceil(a / texel_mm)), 1, max_n);
-  int n_minor = clamp(int(ceil(b / texel_mm)), 1, max(1, max_n / n_major));
-  vec2 e2 = vec2(-e1.y, e1.x);
-  vec3 sum = vec3(0.0);
-  float total = 0.0;
-  for (int i = 0; i < n_major; ++i) {
-    for (int j = 0; j < n_minor; ++j) {
-      vec2 q = p.xy + e1 * (a * ((float(i) + 0.5) / float(n_major) - 0.5)) +
-               e2 * (b * ((float(j) + 0.5) / float(n_minor) - 0.5));
-      if (any(lessThan(q, vec2(0.0))) || any(greaterThan(q, u_size_mm))) continue;
-      vec3 qs = vec3(q, p.z);
-      Surface s = level == 0 ? PointSurface(q) : LevelSurface(q, level);
-      // A sample stands for a patch of the plane; the pixel sees that patch of the relief by its
-      // projected area, (n . v) / n_z of the plane's: at grazing views a slope facing the eye
-      // fills more of the pixel than one facing away.
-      float weight = max(dot(s.n, normalize(u_eye - qs)), 0.0) / max(s.n.z, 0.05);
-      sum += weight * ShadeSurface(qs, s);
-      total += weight;
+  if (Footprint(p, a, b, e1) && a > u_pitch_mm) {
+    // Shading samples on an n_major x n_minor grid over the footprint, at most
+    // u_filter_max_samples, each the surface of the level whose texel is about the sample's share
+    // of the footprint (level 0: the texel itself, as the reference).
+    int max_n = max(u_filter_max_samples, 1);
+    float share_texels = sqrt(a * b / float(max_n)) / u_pitch_mm;
+    int level = clamp(int(floor(log2(max(share_texels, 1.0)))), 0, u_levels - 1);
+    float texel_mm = u_pitch_mm * exp2(float(level));
+    int n_major = clamp(int(ceil(a / texel_mm)), 1, max_n);
+    int n_minor = clamp(int(ceil(b / texel_mm)), 1, max(1, max_n / n_major));
+    vec2 e2 = vec2(-e1.y, e1.x);
+    vec3 sum = vec3(0.0);
+    float total = 0.0;
+    for (int i = 0; i < n_major; ++i) {
+      for (int j = 0; j < n_minor; ++j) {
+        vec2 q = p.xy + e1 * (a * ((float(i) + 0.5) / float(n_major) - 0.5)) +
+                 e2 * (b * ((float(j) + 0.5) / float(n_minor) - 0.5));
+        if (any(lessThan(q, vec2(0.0))) || any(greaterThan(q, u_size_mm))) continue;
+        vec3 qs = vec3(q, p.z);
+        Surface s = level == 0 ? PointSurface(q) : LevelSurface(q, level);
+        // A sample stands for a patch of the plane; the pixel sees that patch of the relief
+        // by its projected area, (n . v) / n_z of the plane's: at grazing views a slope
+        // facing the eye fills more of the pixel than one facing away.
+        float weight = max(dot(s.n, normalize(u_eye - qs)), 0.0) / max(s.n.z, 0.05);
+        sum += weight * ShadeSurface(qs, s);
+        total += weight;
+      }
+    }
+    if (total > 0.0) {
+      filtered = sum / total;
+      // From 1 to 2 texels across, blended into the point-sampled radiance: no seam where it
+      // starts; beyond, the point sample is not shaded at all.
+      blend = clamp(a / u_pitch_mm - 1.0, 0.0, 1.0);
     }
   }
-  if (!(total > 0.0)) return point_radiance;
-  // From 1 to 2 texels across, blended into the point-sampled radiance: no seam where it starts.
-  return mix(point_radiance, sum / total, clamp(a / u_pitch_mm - 1.0, 0.0, 1.0));
-#else
-  return point_radiance;
+  if (blend >= 1.0) return filtered;
 #endif
+  vec3 point_radiance = ShadeSurface(p, PointSurface(p.xy));
+  return blend > 0.0 ? mix(point_radiance, filtered, blend) : point_radiance;
 }

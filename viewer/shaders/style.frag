@@ -84,9 +84,9 @@ void main() {
   float depth = texture(u_depth, frag * inv).r;
   vec3 lin = texture(u_colour, frag * inv).rgb;
   if (depth >= 1.0) { o_color = vec4(u_display_out != 0 ? Display(lin) : lin, 1.0); return; }
-  vec3 p = WorldAt(frag, depth);
   vec3 c = Display(lin);
   if (u_style == 0) { o_color = vec4(Output(c), 1.0); return; }  // realistic: the tone curve only
+  vec3 p = WorldAt(frag, depth);
   float y = dot(c, kLuma);
   // The noise cube only where it is used (four trilinear 3D lookups: most of this pass's cost).
   vec4 t = u_style <= 3 || u_debug != 0 ? DynamicSolid(p) : vec4(0.5);

@@ -779,6 +779,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
   glDisable(GL_CULL_FACE);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
   const Mat4d clip_from_world = ClipFromWorld(camera);
+  const Mat3d world_from_camera = ToCamera(camera).camera_from_scan.rotation.transpose();
 
   std::vector<Light> scene_lights;
   for (const Light& l : lights)
@@ -858,8 +859,7 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
     const Vec3f eye = canvas_from_world.Apply(camera.eye_mm).cast<float>();
     for (int k = 0; k < 4; ++k) glBindTextureUnit(k, p.textures[k]);
     for (int k = 0; k < kShadingChannels; ++k) glBindTextureUnit(4 + k, p.filtered[k]);
-    const Mat3d canvas_from_camera =
-        canvas_from_world.rotation * ToCamera(camera).camera_from_scan.rotation.transpose();
+    const Mat3d canvas_from_camera = canvas_from_world.rotation * world_from_camera;
     const Vec3f cam_right = canvas_from_camera.col(0).cast<float>();
     const Vec3f cam_down = canvas_from_camera.col(1).cast<float>();
     const Vec3f cam_forward = canvas_from_camera.col(2).cast<float>();
