@@ -82,8 +82,10 @@ set(DIGITIZE_PACK_SOURCES
   provenance.cpp   # where a pack came from, and its JSON form
 )
 
-set(DIGITIZE_PIPELINE_HEADERS pipeline.h rti_canvas.h)
+set(DIGITIZE_PIPELINE_HEADERS pipeline.h rti_canvas.h tile_plan.h tile_jobs.h)
 set(DIGITIZE_PIPELINE_SOURCES
   pipeline.cpp     # scan -> canvas -> fit -> pack, as the commands run it
   rti_canvas.cpp   # an RTI capture -> intensities, normals, height, relief
+  tile_plan.cpp    # a painting's fit cut into tiles: the job plan
+  tile_jobs.cpp    # running, merging a tile plan; its Slurm scripts
 )

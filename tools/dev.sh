@@ -26,6 +26,7 @@ packages=(
   ccache                    # rebuilds of unchanged files (three builds: Release, ASan, fuzz)
   # viewer: GL loader, EGL surfaceless + Mesa's llvmpipe for headless, GLFW + ImGui window
   libepoxy-dev libegl-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev libimgui-dev libstb-dev
+  slurm-wlm munge  # tiles as Slurm jobs: the test starts a one-node cluster on localhost
 )
 
 install_packages() {
@@ -66,14 +67,15 @@ run_tests() {  # run_tests DIR LABEL [ctest args...]
 }
 
 # Left out of the sanitized run: accuracy tests that run code smaller tests also run under the
-# sanitizers (the fit, the viewer-vs-Embree comparison), only on bigger inputs, and the install
-# test (packaging). They were ~510 of the sanitized suite's ~1600 CPU seconds (CI log, 2 cores);
+# sanitizers (the fit, the viewer-vs-Embree comparison), only on bigger inputs, the install
+# test (packaging), and the tile runs that are timed kills or a Slurm cluster's jobs (the same
+# commands run sanitized in the other TilesCli tests). They were ~510 of the sanitized suite's ~1600 CPU seconds (CI log, 2 cores);
 # the Release run keeps them all.
 asan_skip='^(ReflectanceFitGgx\.(NoiseFreeGgxPainting|DefaultNoiseLambertianStaysDiffuse)'
 asan_skip+='|ReflectanceFitSynth\.(NoiseFreeHeldOutPsnrAtLeast40dB|DefaultNoiseHeldOutPsnr'
 asan_skip+='|StressMaterials|MismatchedModelIsReported|RaySkippingChangesNothing)'
 asan_skip+='|ViewerTest\.(MatchesEmbreeReferenceAtPaperViews|GgxPackMatchesEmbreeReferenceAtPaperViews)'
-asan_skip+='|install_consumer)$'
+asan_skip+='|TilesCli\.ResumesAfterAKillAtSeveralMoments|install_consumer|slurm_tiles)$'
 
 # Every C++ source and header of the project (tracked files in a git checkout, else the source
 # folders), for the formatting check.

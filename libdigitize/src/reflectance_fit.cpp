@@ -215,83 +215,42 @@ PhotoQuantisation DetectPhotoQuantisation(const PhotoSet& photos) {
   return q;
 }
 
-Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
-                                            const RigidTransform& canvas_from_scan,
-                                            const PhotoSet& photos,
-                                            const ReflectanceFitOptions& options,
-                                            const ProgressCallback& progress) {
-  const auto start = Clock::now();
-  if (Status s = options.Validate(); !s.ok()) return Error{"fit options: " + s.message()};
+namespace {
 
-  ReportProgress(progress, "fit", 0.0);
-  auto t0 = Clock::now();
-  auto tracer = HeightFieldTracer::Build(canvas);
-  if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
-  ReflectanceFitResult result;
+// Samples and fits the texels of `region` into `result` (maps of the region's size); `report`
+// already holds the photo set's part.
+Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
+                 const BrdfFitOptions& fit_options, const TexelRect& region,
+                 ReflectanceFitResult& result, SampleBuffers& buffers,
+                 const std::function<void(size_t)>& fitted_texels) {
+  const HeightField& canvas = *scene.canvas;
   ReflectanceFitReport& report = result.report;
-  report.seconds_tracer = Since(t0);
-
-  SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
-  if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
-  PixelTexelMaps pixel_maps;
-  if (options.pixel_texel_maps) {
-    t0 = Clock::now();
-    pixel_maps = MapPixelsToTexels(photos, canvas, canvas_from_scan, *tracer);
-    scene.pixel_texels = &pixel_maps;
-    report.seconds_samples += Since(t0);
-  }
-  CountPhotoDirections(photos, canvas, canvas_from_scan, report);
-  const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
-  if (report.distinct_directions < needed) {
-    const int n = report.distinct_directions;
-    const size_t below = report.light_below_canvas.size();
-    return Error{photos.source.string() + ": only " + std::to_string(n) +
-                 " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
-                 " with the light above the canvas, in " + std::to_string(report.photos) +
-                 (report.photos == 1 ? " photo" : " photos") +
-                 (below ? " (" + std::to_string(below) + " lit from at or below the canvas)" : "") +
-                 "; the fit needs at least " + std::to_string(needed) + " (min_samples " +
-                 std::to_string(options.fit.min_samples) +
-                 "): with fewer, every texel would be \"too few samples\", none told diffuse "
-                 "from glossy"};
-  }
-
   std::vector<uint32_t> texels;
-  texels.reserve(canvas.height_mm.size());
-  for (size_t i = 0; i < canvas.state.size(); ++i) {
-    if (canvas.state.data[i] == TexelState::kOutside)
-      ++report.texels_outside;
-    else
-      texels.push_back(static_cast<uint32_t>(i));
-  }
-
-  BrdfFitOptions fit_options = options.fit;
-  if (options.quantisation_from_photos) {
-    report.quantisation = DetectPhotoQuantisation(photos);
-    fit_options.photo_code_max = report.quantisation.code_max;
-    fit_options.photo_codes_srgb = report.quantisation.srgb;
-    fit_options.photo_compression_sigma_codes =
-        report.quantisation.lossy ? options.jpeg_sigma_codes : 0.0;
-  } else {
-    report.quantisation = {options.fit.photo_code_max, options.fit.photo_codes_srgb,
-                           options.fit.photo_compression_sigma_codes > 0};
+  texels.reserve(region.texels());
+  for (int y = region.y; y < region.y + region.height; ++y) {
+    for (int x = region.x; x < region.x + region.width; ++x) {
+      if (canvas.state(x, y) == TexelState::kOutside)
+        ++report.texels_outside;
+      else
+        texels.push_back(static_cast<uint32_t>(y) * static_cast<uint32_t>(canvas.width()) +
+                         static_cast<uint32_t>(x));
+    }
   }
 
   ReflectanceMaps& maps = result.maps;
-  maps = ReflectanceMaps::Zeros(canvas.width(), canvas.height());
+  maps = ReflectanceMaps::Zeros(region.width, region.height);
   BrdfFitSummary& summary = report.fit;
   summary.method = options.fit.method;
   double rms_sum = 0, iteration_sum = 0;
   size_t lobe_texels = 0;
   const size_t tile = static_cast<size_t>(options.tile_texels);
   BrdfSamples samples;
-  SampleBuffers buffers;
   for (size_t begin = 0; begin < texels.size(); begin += tile) {
     const std::span<const uint32_t> part(texels.data() + begin,
                                          std::min(tile, texels.size() - begin));
     samples.samples.clear();
     samples.texel_begin.assign(1, 0);
-    t0 = Clock::now();
+    auto t0 = Clock::now();
     GatherSamples(scene, part, options.samples, samples, report.samples, true, &buffers);
     report.seconds_samples += Since(t0);
 
@@ -326,8 +285,8 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
     report.seconds_fit += Since(t0);
 
     for (size_t t = 0; t < part.size(); ++t) {
-      const int x = static_cast<int>(part[t] % static_cast<uint32_t>(canvas.width()));
-      const int y = static_cast<int>(part[t] / static_cast<uint32_t>(canvas.width()));
+      const int x = static_cast<int>(part[t] % static_cast<uint32_t>(canvas.width())) - region.x;
+      const int y = static_cast<int>(part[t] / static_cast<uint32_t>(canvas.width())) - region.y;
       if (fit.model[t] == ReflectanceModel::kGgx)
         maps.SetGgx(x, y, fit.ggx[t]);
       else
@@ -353,18 +312,126 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
                               fit.summary.count(TexelFitStatus::kTooFewSamples);
     iteration_sum += fit.summary.mean_iterations * static_cast<double>(tile_lobes);
     lobe_texels += tile_lobes;
-    ReportProgress(progress, "fit",
-                   static_cast<double>(begin + part.size()) / static_cast<double>(texels.size()));
+    fitted_texels(part.size());
   }
   summary.mean_rms_error = summary.texels ? rms_sum / static_cast<double>(summary.texels) : 0.0;
   summary.mean_iterations = lobe_texels ? iteration_sum / static_cast<double>(lobe_texels) : 0.0;
   summary.seconds = report.seconds_fit;
-  report.seconds_total = Since(start);
   // Texels with no photo at all never reached FitBrdf's own check: check the whole maps once.
   const Status valid = maps.Validate();
   DIGITIZE_CHECK(valid.ok(), "FitReflectance produced invalid maps: " + valid.message());
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& normals,
+                             const RigidTransform& canvas_from_scan, const PhotoSet& photos,
+                             const ReflectanceFitOptions& options,
+                             std::span<const TexelRect> regions, const RegionFitted& done,
+                             const ProgressCallback& progress) {
+  auto start = Clock::now();
+  if (Status s = options.Validate(); !s.ok()) return Error{"fit options: " + s.message()};
+  ReportProgress(progress, "fit", 0.0);
+  auto t0 = Clock::now();
+  auto tracer = HeightFieldTracer::Build(canvas);
+  if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
+  size_t all_texels = 0;
+  for (size_t r = 0; r < regions.size(); ++r) {
+    const TexelRect& g = regions[r];
+    if (g.width <= 0 || g.height <= 0 || g.x < 0 || g.y < 0 || g.x + g.width > canvas.width() ||
+        g.y + g.height > canvas.height())
+      return Error{Format("region %zu (%d, %d, %d x %d) is not inside the %d x %d canvas", r, g.x,
+                          g.y, g.width, g.height, canvas.width(), canvas.height())};
+    all_texels += g.texels();
+  }
+
+  // The photo set's part of every region's report; the first region's also carries the time of
+  // what all regions share (the tracer, the pixel maps).
+  ReflectanceFitReport shared;
+  shared.seconds_tracer = Since(t0);
+
+  SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
+  if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
+  PixelTexelMaps pixel_maps;
+  if (options.pixel_texel_maps) {
+    t0 = Clock::now();
+    pixel_maps = MapPixelsToTexels(photos, canvas, canvas_from_scan, *tracer);
+    scene.pixel_texels = &pixel_maps;
+    shared.seconds_samples += Since(t0);
+  }
+  CountPhotoDirections(photos, canvas, canvas_from_scan, shared);
+  const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
+  if (shared.distinct_directions < needed) {
+    const int n = shared.distinct_directions;
+    const size_t below = shared.light_below_canvas.size();
+    return Error{photos.source.string() + ": only " + std::to_string(n) +
+                 " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
+                 " with the light above the canvas, in " + std::to_string(shared.photos) +
+                 (shared.photos == 1 ? " photo" : " photos") +
+                 (below ? " (" + std::to_string(below) + " lit from at or below the canvas)" : "") +
+                 "; the fit needs at least " + std::to_string(needed) + " (min_samples " +
+                 std::to_string(options.fit.min_samples) +
+                 "): with fewer, every texel would be \"too few samples\", none told diffuse "
+                 "from glossy"};
+  }
+
+  BrdfFitOptions fit_options = options.fit;
+  if (options.quantisation_from_photos) {
+    shared.quantisation = DetectPhotoQuantisation(photos);
+    fit_options.photo_code_max = shared.quantisation.code_max;
+    fit_options.photo_codes_srgb = shared.quantisation.srgb;
+    fit_options.photo_compression_sigma_codes =
+        shared.quantisation.lossy ? options.jpeg_sigma_codes : 0.0;
+  } else {
+    shared.quantisation = {options.fit.photo_code_max, options.fit.photo_codes_srgb,
+                           options.fit.photo_compression_sigma_codes > 0};
+  }
+
+  SampleBuffers buffers;
+  size_t texels_done = 0;
+  const auto fitted_texels = [&](size_t n) {
+    texels_done += n;
+    ReportProgress(progress, "fit",
+                   static_cast<double>(texels_done) / static_cast<double>(all_texels));
+  };
+  for (size_t r = 0; r < regions.size(); ++r) {
+    ReflectanceFitResult result;
+    result.report = shared;
+    if (r > 0) {
+      result.report.seconds_tracer = 0;
+      result.report.seconds_samples = 0;
+      start = Clock::now();
+    }
+    if (Status s =
+            FitRegion(scene, options, fit_options, regions[r], result, buffers, fitted_texels);
+        !s.ok())
+      return s;
+    // kOutside texels count towards progress too (they are skipped, not fitted).
+    texels_done += result.report.texels_outside;
+    result.report.seconds_total = Since(start);
+    if (Status s = done(r, std::move(result)); !s.ok()) return s;
+  }
   ReportProgress(progress, "fit", 1.0);
-  return result;
+  return Status::Ok();
+}
+
+Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Grid<Vec3f>& normals,
+                                            const RigidTransform& canvas_from_scan,
+                                            const PhotoSet& photos,
+                                            const ReflectanceFitOptions& options,
+                                            const ProgressCallback& progress) {
+  const TexelRect whole{0, 0, canvas.width(), canvas.height()};
+  ReflectanceFitResult fitted;
+  const Status s = FitReflectanceRegions(
+      canvas, normals, canvas_from_scan, photos, options, std::span(&whole, 1),
+      [&](size_t, ReflectanceFitResult&& result) {
+        fitted = std::move(result);
+        return Status::Ok();
+      },
+      progress);
+  if (!s.ok()) return Error{s.message()};
+  return fitted;
 }
 
 nlohmann::json ToJson(const ReflectanceFitOptions& options) {

@@ -62,6 +62,53 @@ void AddPhotoSetFlags(CLI::App* c, PhotoSetOptions& o) {
       ->group("Photos");
 }
 
+CLI::Option* AddFitFlags(CLI::App* c, ReflectanceFitOptions& o, PhotoSetOptions& photo) {
+  c->add_option("--noise-sigma", o.fit.noise_sigma,
+                "Radiance noise per channel (linear units, 1 = white): diffuse-only test, outliers")
+      ->capture_default_str()
+      ->group("Fit");
+  c->add_option("--min-samples", o.fit.min_samples,
+                "Usable samples a texel needs for a lobe fit (fewer: diffuse-only fallback)")
+      ->capture_default_str()
+      ->group("Fit");
+  c->add_option("--k-max", o.fit.k_max, "Largest lobe exponent k")
+      ->capture_default_str()
+      ->group("Fit");
+  c->add_option(
+       "--max-specular-albedo", o.fit.max_specular_albedo,
+       "Energy bound of the lobe: rho_s 2 pi / (k + 2) <= this (raise for uncalibrated lights)")
+      ->capture_default_str()
+      ->group("Fit");
+  CLI::Option* dark_ratio =
+      c->add_option("--dark-outlier-ratio", o.dark_outlier_ratio,
+                    "Samples below this share of the diffuse floor are unmodelled shadows (<= 0: "
+                    "keep all; RTI captures: off unless given)")
+          ->capture_default_str()
+          ->group("Fit");
+  c->add_option("--min-cos", o.samples.min_cos,
+                "n.v and n.l must exceed this (0 = anything above the horizon)")
+      ->capture_default_str()
+      ->group("Samples");
+  c->add_flag("!--no-shadow-rays", o.samples.shadow_rays,
+              "Do not reject samples whose light the relief blocks")
+      ->group("Samples");
+  c->add_flag("!--no-visibility-rays", o.samples.visibility_rays,
+              "Do not reject samples whose texel the relief hides from the camera")
+      ->group("Samples");
+  c->add_flag("!--no-skip", o.samples.trace.skip_unblockable,
+              "Trace every ray (no skipping of rays that cannot be blocked; for comparison)")
+      ->group("Samples");
+  c->add_option("--saturation", photo.saturation_encoded,
+                "Encoded level (0..1) at or above which an 8/16-bit channel is saturated")
+      ->capture_default_str()
+      ->group("Photos");
+  c->add_option("--tile-texels", o.tile_texels,
+                "Texels sampled and fitted at a time (memory: ~ tile x photos x 48 bytes)")
+      ->capture_default_str()
+      ->group("Performance");
+  return dark_ratio;
+}
+
 void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidualReport>& check) {
   if (!check) return;
   for (const std::string& w : check->Warnings()) Warn(command, w);

@@ -25,6 +25,7 @@ void AddInspectCommand(CLI::App& app, int& exit_code);
 void AddVerifyCommand(CLI::App& app, int& exit_code);
 void AddRunCommand(CLI::App& app, int& exit_code);
 void AddRtiCommand(CLI::App& app, int& exit_code);
+void AddTilesCommand(CLI::App& app, int& exit_code);
 
 // --- shared by several commands (cli_common.cpp) ---
 
@@ -38,6 +39,9 @@ void PrintPackSummaryLine(const std::string& path, const PackSummary& summary);
 void AddPackWriteFlags(CLI::App* command, PackWriteOptions& options, bool& quantised);
 // Photo-set flags (--rti-pitch-mm, --allow-outside-paths) shared by fit and run.
 void AddPhotoSetFlags(CLI::App* command, PhotoSetOptions& options);
+// The fit's flags (groups Fit, Samples, Photos' --saturation, Performance's --tile-texels), shared
+// by fit and tiles plan. Returns --dark-outlier-ratio's option (whether the user gave it).
+CLI::Option* AddFitFlags(CLI::App* command, ReflectanceFitOptions& options, PhotoSetOptions& photo);
 // The photo check's warnings, and one line with its brief.
 void PrintPhotoCheck(const std::string& command, const std::optional<PhotoResidualReport>& check);
 // --no-photo-check and --held-out-out, as fit and run take them.

@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   digitize::cli::AddPackCommand(app, exit_code);
   digitize::cli::AddRunCommand(app, exit_code);
   digitize::cli::AddRtiCommand(app, exit_code);
+  digitize::cli::AddTilesCommand(app, exit_code);
   digitize::cli::AddInspectCommand(app, exit_code);
   digitize::cli::AddVerifyCommand(app, exit_code);
   digitize::cli::AddDemoCommand(app, exit_code);

@@ -27,6 +27,8 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -124,6 +126,28 @@ Result<ReflectanceFitResult> FitReflectance(const HeightField& canvas, const Gri
                                             const PhotoSet& photos,
                                             const ReflectanceFitOptions& options,
                                             const ProgressCallback& progress = nullptr);
+
+// A rectangle of canvas texels: columns [x, x + width), rows [y, y + height).
+struct TexelRect {
+  int x = 0, y = 0, width = 0, height = 0;
+  size_t texels() const { return static_cast<size_t>(width) * static_cast<size_t>(height); }
+  bool operator==(const TexelRect&) const = default;
+};
+
+// FitReflectance on parts of the canvas (the tiles of a tile plan, tile_plan.h), in order, with
+// one tracer and one set of pixel maps for all of them: each region's texels are sampled and
+// fitted as FitReflectance would (every texel's samples, fit and status are its own, so a
+// region's maps are BIT-IDENTICAL to the same texels of the whole canvas's fit), and `done` gets
+// the region's maps (the region's size) and its report (its samples, texels and times; the
+// photo-set fields as the whole fit's) before the next region starts -- so a caller that writes
+// each one out can be killed and resume. A `done` error stops the run and is returned. Errors as
+// FitReflectance; a region not inside the canvas or empty.
+using RegionFitted = std::function<Status(size_t region, ReflectanceFitResult&& result)>;
+Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& normals,
+                             const RigidTransform& canvas_from_scan, const PhotoSet& photos,
+                             const ReflectanceFitOptions& options,
+                             std::span<const TexelRect> regions, const RegionFitted& done,
+                             const ProgressCallback& progress = nullptr);
 
 // The report as JSON text (docs/formats.md, "fit report").
 std::string ReflectanceReportJson(const ReflectanceFitResult& result,

@@ -1,0 +1,94 @@
+// Running a tile plan (tile_plan.h): fit tiles, say which are done, merge them into the fit folder
+// and the pack, and write the Slurm scripts that do the same on a cluster (docs/cluster.md).
+//
+// Layer: pipeline (tile_plan.h, reflectance_fit.h, pack.h).
+//
+// WORK FOLDER (the plan's `work`), written only by these functions:
+//   .digitize-tiles     marks the folder as a tile plan's (never written into a folder without it
+//                       that is not empty: a folder of the user's is not used)
+//   tile_NNNNN/         one tile's result: the fit folder files (WriteReflectanceOutputs) of the
+//                       tile's texels, and tile.json (the plan id, the index, the rectangle);
+//                       written atomically (WriteDirectoryAtomically), so a tile is either there
+//                       whole or not at all, whenever the job is killed
+//   fit/                the merged fit folder
+//   run.log             one line per tile fitted, and per merge
+//   slurm/              tiles.sbatch, merge.sbatch, submit.sh (WriteSlurmScripts)
+//   logs/               the Slurm jobs' output (tile_<index>.log, merge.log)
+// A tile is DONE when its folder is complete and its tile.json names this plan's id, its index
+// and its rectangle: so runs resume where they stopped, and a re-cut plan never takes an old
+// tile for its own.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "digitize/core.h"
+#include "digitize/pack.h"
+#include "digitize/tile_plan.h"
+
+namespace digitize {
+
+inline constexpr const char* kTileWorkMarker = ".digitize-tiles";
+
+struct TilesStatus {
+  size_t tiles = 0;
+  std::vector<size_t> done, pending;  // indices, ascending
+  bool merged = false;                // fit/ is there and the pack exists
+  std::string Brief() const;          // "12 of 16 tiles done; pending: 3, 7, 8, 15"
+};
+Result<TilesStatus> StatusOfTiles(const TilePlan& plan);
+
+struct TileRunOptions {
+  std::vector<size_t> indices;  // tiles to fit; empty: every tile not done
+  int threads = 0;              // worker threads (0 = all cores)
+  bool redo = false;            // fit tiles that are done again
+};
+
+struct TileRunReport {
+  std::vector<size_t> fitted;   // this run
+  std::vector<size_t> skipped;  // done already
+  double seconds = 0;
+  std::string Brief() const;  // "fitted 4 tiles (3, 5, 6, 9), 12 done already; 41.2 s"
+};
+
+// Fits the chosen tiles (in index order) with one load of the canvas and the photos and one
+// tracer for all of them (FitReflectanceRegions), writing each tile's folder as soon as it is
+// fitted. Checks first: the plan's inputs still there, the canvas the plan's size, the work
+// folder the plan's (created with its marker when missing), every index in range. Errors name
+// the plan, the tile or the input.
+Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
+                               const ProgressCallback& progress = nullptr);
+
+struct TileMergeReport {
+  ReflectanceFitReport fit;  // the tiles' reports summed (times: summed over the tiles)
+  PackSummary pack;          // of the written pack
+};
+
+// Every tile done (else an error naming how many are pending and the first of them): their maps
+// assembled into the canvas's, written as the fit folder work/fit (report.json with the summed
+// report), then the pack at plan.out (PackFromFolders: provenance, atomic, never over an input).
+Result<TileMergeReport> MergeTiles(const TilePlan& plan,
+                                   const ProgressCallback& progress = nullptr);
+
+struct SlurmScriptOptions {
+  std::string digitize;   // the `digitize` executable the jobs run (absolute)
+  int cpus_per_task = 2;  // each tile job's cores (passed on as --threads)
+  int mem_mb = 0;         // each job's memory request; 0: the cluster's default
+  std::string partition;  // empty: the default partition
+  std::string time;       // each job's limit ("2:00:00"); empty: the partition's
+  int max_running = 0;    // at most this many tiles at once (--array=...%N); 0: no limit
+  Status Validate() const;
+};
+
+struct SlurmScripts {
+  std::filesystem::path tiles, merge, submit;  // work/slurm/...
+};
+
+// Writes work/slurm/tiles.sbatch (a job array, one task per tile: `digitize tiles run PLAN
+// --index $SLURM_ARRAY_TASK_ID`), merge.sbatch (`digitize tiles merge PLAN`) and submit.sh, which
+// submits the array and then the merge with --dependency=afterok on it, and prints both job ids.
+// Paths are quoted for the shell; a path with a newline or a NUL is refused.
+Result<SlurmScripts> WriteSlurmScripts(const TilePlan& plan, const SlurmScriptOptions& options);
+
+}  // namespace digitize

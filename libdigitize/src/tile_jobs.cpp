@@ -1,0 +1,445 @@
+#include "digitize/tile_jobs.h"
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <nlohmann/json.hpp>
+
+#include "digitize/image_io.h"
+#include "digitize/output_dir.h"
+#include "digitize/pipeline.h"
+#include "digitize/preprocess.h"
+#include "json_fields.h"
+
+namespace digitize {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::string Format(const char* fmt, auto... args) {
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer), fmt, args...);
+  return buffer;
+}
+
+constexpr const char* kTileResultFormat = "digitize.tile_result";
+constexpr const char* kTileResultFile = "tile.json";
+
+std::string IndexList(const std::vector<size_t>& indices, size_t at_most = 12) {
+  std::string s;
+  for (size_t i = 0; i < indices.size() && i < at_most; ++i)
+    s += (i ? ", " : "") + std::to_string(indices[i]);
+  if (indices.size() > at_most) s += ", ...";
+  return s;
+}
+
+json TileResultJson(const TilePlan& plan, size_t index) {
+  const TexelRect& t = plan.tiles[index];
+  return {{"format", kTileResultFormat},
+          {"version", 1},
+          {"plan", plan.id},
+          {"index", index},
+          {"rect", {t.x, t.y, t.width, t.height}}};
+}
+
+// Whether tile `index`'s folder is a complete result of this plan (see the header).
+bool TileDone(const TilePlan& plan, size_t index) {
+  const fs::path dir = plan.TileFolder(index);
+  std::error_code ec;
+  if (!fs::is_regular_file(dir / kOutputMarkerName, ec)) return false;
+  auto text = ReadTextFile(dir / kTileResultFile, "tile result", 1 << 16);
+  if (!text.ok()) return false;
+  const json doc = json::parse(*text, nullptr, false);
+  return !doc.is_discarded() && doc == TileResultJson(plan, index);
+}
+
+// The work folder, created with its marker, or an existing one that is a tile plan's.
+Status UseWorkFolder(const TilePlan& plan) {
+  if (Status s = CheckOutputPath(plan.work, {plan.canvas, plan.photos}); !s.ok()) return s;
+  std::error_code ec;
+  const fs::path marker = plan.work / kTileWorkMarker;
+  if (fs::is_regular_file(marker, ec)) return Status::Ok();
+  if (fs::exists(plan.work, ec)) {
+    if (!fs::is_directory(plan.work, ec))
+      return Error{plan.work.string() + ": the plan's work folder is a file"};
+    if (!fs::is_empty(plan.work, ec))
+      return Error{plan.work.string() +
+                   ": exists, is not empty and is not a tile plan's work "
+                   "folder (no " +
+                   std::string(kTileWorkMarker) + "): not used; make the plan with another --work"};
+  }
+  fs::create_directories(plan.work, ec);
+  if (ec) return Error{plan.work.string() + ": cannot create the work folder: " + ec.message()};
+  return WriteTextFile(marker, "digitize tile plan work folder: " + plan.file.string() + "\n");
+}
+
+void AppendLog(const TilePlan& plan, const std::string& line) {
+  FILE* log = std::fopen((plan.work / "run.log").c_str(), "a");
+  if (log == nullptr) return;  // the log is for people; the results say what was done
+  const std::time_t now = std::time(nullptr);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  std::fprintf(log, "%s %s\n", stamp, line.c_str());
+  std::fclose(log);
+}
+
+std::vector<std::string> PlanInputs(const TilePlan& plan) {
+  return {plan.canvas.string(), plan.photos.string()};
+}
+
+// A tile's report.json (WriteReflectanceOutputs) back into the counts the merge sums.
+Result<ReflectanceFitReport> ReadTileReport(const fs::path& file) {
+  auto text = ReadTextFile(file, "fit report");
+  if (!text.ok()) return text.error();
+  return CatchBadInput([&]() {
+    const json doc = ParseJson(*text, file.string());
+    const Fields f(doc, file.string());
+    ReflectanceFitReport r;
+    const Fields photos = f.Object("photos");
+    r.photos = static_cast<size_t>(photos.Integer("count", 0, int64_t{1} << 40));
+    r.distinct_directions =
+        static_cast<int>(photos.Integer("distinct_directions", 0, int64_t{1} << 30));
+    for (const json& e : photos.Array("light_below_canvas_entries")) {
+      if (!e.is_string()) Fail(photos.At("light_below_canvas_entries") + ": not a string");
+      r.light_below_canvas.push_back(e.get<std::string>());
+    }
+    constexpr int64_t kMany = int64_t{1} << 50;
+    r.fit.texels = static_cast<size_t>(f.Integer("texels_fitted", 0, kMany));
+    r.samples.texels = r.fit.texels;
+    r.texels_outside = static_cast<size_t>(f.Integer("texels_outside", 0, kMany));
+    const Fields status = f.Object("status");
+    for (int i = 0; i < kTexelFitStatusCount; ++i)
+      r.fit.count_by_status[i] =
+          static_cast<size_t>(status.Integer(ToString(static_cast<TexelFitStatus>(i)), 0, kMany));
+    const Fields lobes = f.Object("lobes_by_model");
+    for (int m = 0; m < kReflectanceModelCount; ++m)
+      r.fit.lobes_by_model[m] =
+          static_cast<size_t>(lobes.Integer(ToString(static_cast<ReflectanceModel>(m)), 0, kMany));
+    const Fields q = f.Object("photo_quantisation");
+    r.quantisation = {static_cast<int>(q.Integer("code_max", 0, 65535)), q.Boolean("srgb"),
+                      q.Boolean("lossy")};
+    const Fields s = f.Object("samples");
+    SampleStats& st = r.samples;
+    st.candidates = static_cast<size_t>(s.Integer("candidates", 0, kMany));
+    st.kept = static_cast<size_t>(s.Integer("kept", 0, kMany));
+    const Fields rej = s.Object("rejected");
+    const auto count = [&](const char* key) {
+      return static_cast<size_t>(rej.Integer(key, 0, kMany));
+    };
+    st.behind_camera = count("behind_camera");
+    st.outside_image = count("outside_image");
+    st.facing_away = count("facing_away");
+    st.light_below_horizon = count("light_below_horizon");
+    st.non_finite = count("non_finite");
+    st.saturated = count("saturated");
+    st.black = count("black");
+    st.hidden = count("hidden");
+    st.shadowed = count("shadowed");
+    r.dark_outliers = count("dark_outliers");
+    const auto rays = [&](const char* key) {
+      const Fields o = s.Object(key);
+      TraceStats t;
+      t.rays = static_cast<size_t>(o.Integer("rays", 0, kMany));
+      t.skipped = static_cast<size_t>(o.Integer("skipped", 0, kMany));
+      t.traced = static_cast<size_t>(o.Integer("traced", 0, kMany));
+      t.blocked = static_cast<size_t>(o.Integer("blocked", 0, kMany));
+      return t;
+    };
+    st.view_rays = rays("view_rays");
+    st.light_rays = rays("light_rays");
+    r.texels_refitted = static_cast<size_t>(f.Integer("texels_refitted", 0, kMany));
+    r.fit.mean_rms_error = f.Number("mean_rms_error");
+    r.fit.mean_iterations = f.Number("mean_iterations");
+    const Fields sec = f.Object("seconds");
+    r.seconds_tracer = sec.Number("tracer");
+    r.seconds_samples = sec.Number("samples");
+    r.seconds_fit = sec.Number("fit");
+    r.seconds_total = sec.Number("total");
+    return r;
+  });
+}
+
+// `total` += `part` for the counts a fit report sums over tiles.
+void AddTileReport(ReflectanceFitReport& total, const ReflectanceFitReport& part) {
+  const size_t lobes_total = total.fit.texels - total.fit.count(TexelFitStatus::kDiffuseOnly) -
+                             total.fit.count(TexelFitStatus::kTooFewSamples);
+  const size_t lobes_part = part.fit.texels - part.fit.count(TexelFitStatus::kDiffuseOnly) -
+                            part.fit.count(TexelFitStatus::kTooFewSamples);
+  const double texels = static_cast<double>(total.fit.texels + part.fit.texels);
+  if (texels > 0)
+    total.fit.mean_rms_error = (total.fit.mean_rms_error * static_cast<double>(total.fit.texels) +
+                                part.fit.mean_rms_error * static_cast<double>(part.fit.texels)) /
+                               texels;
+  if (lobes_total + lobes_part > 0)
+    total.fit.mean_iterations = (total.fit.mean_iterations * static_cast<double>(lobes_total) +
+                                 part.fit.mean_iterations * static_cast<double>(lobes_part)) /
+                                static_cast<double>(lobes_total + lobes_part);
+  total.fit.texels += part.fit.texels;
+  for (int i = 0; i < kTexelFitStatusCount; ++i)
+    total.fit.count_by_status[i] += part.fit.count_by_status[i];
+  for (int m = 0; m < kReflectanceModelCount; ++m)
+    total.fit.lobes_by_model[m] += part.fit.lobes_by_model[m];
+  total.samples += part.samples;
+  total.texels_outside += part.texels_outside;
+  total.dark_outliers += part.dark_outliers;
+  total.texels_refitted += part.texels_refitted;
+  total.seconds_tracer += part.seconds_tracer;
+  total.seconds_samples += part.seconds_samples;
+  total.seconds_fit += part.seconds_fit;
+  total.seconds_total += part.seconds_total;
+}
+
+// The shell's single quotes around `text` (' as '\'').
+std::string ShellQuote(const std::string& text) {
+  std::string out = "'";
+  for (char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+}  // namespace
+
+std::string TilesStatus::Brief() const {
+  std::string s = Format("%zu of %zu tiles done", done.size(), tiles);
+  if (!pending.empty()) s += "; pending: " + IndexList(pending);
+  if (merged) s += "; merged";
+  return s;
+}
+
+Result<TilesStatus> StatusOfTiles(const TilePlan& plan) {
+  TilesStatus status;
+  status.tiles = plan.tiles.size();
+  for (size_t i = 0; i < plan.tiles.size(); ++i)
+    (TileDone(plan, i) ? status.done : status.pending).push_back(i);
+  std::error_code ec;
+  status.merged = status.pending.empty() &&
+                  fs::is_regular_file(plan.FitFolder() / kOutputMarkerName, ec) &&
+                  fs::is_regular_file(plan.out, ec);
+  return status;
+}
+
+std::string TileRunReport::Brief() const {
+  std::string s = Format("fitted %zu tile%s", fitted.size(), fitted.size() == 1 ? "" : "s");
+  if (!fitted.empty()) s += " (" + IndexList(fitted) + ")";
+  if (!skipped.empty()) s += Format(", %zu done already", skipped.size());
+  return s + Format("; %.1f s", seconds);
+}
+
+Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
+                               const ProgressCallback& progress) {
+  const auto start = Clock::now();
+  if (options.threads < 0) return Error{"threads must be >= 0"};
+  for (size_t index : options.indices)
+    if (index >= plan.tiles.size())
+      return Error{plan.file.string() + ": no tile " + std::to_string(index) + " (the plan has " +
+                   std::to_string(plan.tiles.size()) + ", 0 to " +
+                   std::to_string(plan.tiles.size() - 1) + ")"};
+  TileRunReport report;
+  std::vector<size_t> todo;
+  std::vector<size_t> chosen = options.indices;
+  if (chosen.empty())
+    for (size_t i = 0; i < plan.tiles.size(); ++i) chosen.push_back(i);
+  std::sort(chosen.begin(), chosen.end());
+  chosen.erase(std::unique(chosen.begin(), chosen.end()), chosen.end());
+  for (size_t index : chosen)
+    (!options.redo && TileDone(plan, index) ? report.skipped : todo).push_back(index);
+  if (todo.empty()) {
+    report.seconds = Since(start);
+    return report;
+  }
+  if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
+
+  // Read as `digitize fit` reads them, so each tile sees what the whole canvas's fit would.
+  ReportProgress(progress, "photos", 0.0);
+  auto photos = ReadPhotoSetFile(plan.photos, plan.photo, progress);
+  if (!photos.ok()) return photos.error();
+  if (photos->is_rti)
+    return Error{plan.photos.string() + ": an RTI capture: fit it untiled (`digitize fit`)"};
+  auto canvas = ReadPreprocessOutputs(plan.canvas);
+  if (!canvas.ok()) return canvas.error();
+  if (canvas->field.width() != plan.canvas_width || canvas->field.height() != plan.canvas_height)
+    return Error{plan.canvas.string() + ": the canvas is " + std::to_string(canvas->field.width()) +
+                 " x " + std::to_string(canvas->field.height()) + " texels, the plan " +
+                 plan.file.string() + " was cut for " + std::to_string(plan.canvas_width) + " x " +
+                 std::to_string(plan.canvas_height) + ": make a new plan"};
+  ReflectanceFitOptions fit = plan.fit;
+  fit.fit.num_threads = options.threads;
+  fit.samples.trace.num_threads = options.threads;
+  std::vector<TexelRect> regions;
+  for (size_t index : todo) regions.push_back(plan.tiles[index]);
+  const FolderOutput output{"tiles run", "fit-tile", {plan.canvas, plan.photos}};
+  const std::vector<std::string> inputs = PlanInputs(plan);
+  const Status fitted = FitReflectanceRegions(
+      canvas->field, canvas->normals, canvas->canvas_from_scan, *photos, fit, regions,
+      [&](size_t r, ReflectanceFitResult&& result) -> Status {
+        const size_t index = todo[r];
+        const Status written =
+            WriteDirectoryAtomically(plan.TileFolder(index), output, [&](const fs::path& dir) {
+              if (Status s = WriteReflectanceOutputs(dir, result, plan.fit, inputs); !s.ok())
+                return s;
+              return WriteTextFile(dir / kTileResultFile,
+                                   TileResultJson(plan, index).dump(2) + "\n");
+            });
+        if (!written.ok()) return Error{"tile " + std::to_string(index) + ": " + written.message()};
+        report.fitted.push_back(index);
+        AppendLog(plan, Format("tile %zu of %zu fitted in %.1f s: ", index, plan.tiles.size(),
+                               result.report.seconds_total) +
+                            result.report.Brief());
+        return Status::Ok();
+      },
+      progress);
+  if (!fitted.ok()) return Error{plan.file.string() + ": " + fitted.message()};
+  report.seconds = Since(start);
+  return report;
+}
+
+Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback& progress) {
+  auto status = StatusOfTiles(plan);
+  if (!status.ok()) return status.error();
+  if (!status->pending.empty())
+    return Error{plan.file.string() + ": " + std::to_string(status->pending.size()) + " of " +
+                 std::to_string(plan.tiles.size()) +
+                 " tiles are not done (tiles: " + IndexList(status->pending) +
+                 "); run them first (`digitize tiles run PLAN --all`)"};
+  if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
+  TileMergeReport merged;
+  ReflectanceFitResult whole;
+  whole.maps = ReflectanceMaps::Zeros(plan.canvas_width, plan.canvas_height);
+  ReportProgress(progress, "merge", 0.0);
+  for (size_t i = 0; i < plan.tiles.size(); ++i) {
+    const fs::path dir = plan.TileFolder(i);
+    auto maps = ReadReflectanceMaps(dir);
+    if (!maps.ok()) return maps.error();
+    const TexelRect& t = plan.tiles[i];
+    if (maps->width() != t.width || maps->height() != t.height)
+      return Error{dir.string() + ": maps are " + std::to_string(maps->width()) + " x " +
+                   std::to_string(maps->height()) + ", the tile " + std::to_string(t.width) +
+                   " x " + std::to_string(t.height)};
+    auto part = ReadTileReport(dir / "report.json");
+    if (!part.ok()) return part.error();
+    if (i == 0) {
+      whole.report.photos = part->photos;
+      whole.report.distinct_directions = part->distinct_directions;
+      whole.report.light_below_canvas = part->light_below_canvas;
+      whole.report.quantisation = part->quantisation;
+    }
+    AddTileReport(whole.report, *part);
+    ReflectanceMaps& m = whole.maps;
+    for (int y = 0; y < t.height; ++y) {
+      for (int x = 0; x < t.width; ++x) {
+        const int cx = t.x + x, cy = t.y + y;
+        m.rho_d(cx, cy) = maps->rho_d(x, y);
+        m.rho_s(cx, cy) = maps->rho_s(x, y);
+        m.lobe(cx, cy) = maps->lobe(x, y);
+        m.fit_error(cx, cy) = maps->fit_error(x, y);
+        m.status(cx, cy) = maps->status(x, y);
+        m.model(cx, cy) = maps->model(x, y);
+      }
+    }
+    ReportProgress(progress, "merge",
+                   0.8 * static_cast<double>(i + 1) / static_cast<double>(plan.tiles.size()));
+  }
+  whole.report.fit.method = plan.fit.fit.method;
+  whole.report.fit.seconds = whole.report.seconds_fit;
+  const FolderOutput output{"tiles merge", "fit", {plan.canvas, plan.photos}};
+  const std::vector<std::string> inputs = PlanInputs(plan);
+  if (Status s = WriteDirectoryAtomically(plan.FitFolder(), output,
+                                          [&](const fs::path& dir) {
+                                            return WriteReflectanceOutputs(dir, whole, plan.fit,
+                                                                           inputs);
+                                          });
+      !s.ok())
+    return Error{s.message()};
+  ReportProgress(progress, "merge", 0.9);
+  auto pack = PackFromFolders(plan.canvas, plan.FitFolder(), plan.out, plan.pack);
+  if (!pack.ok()) return pack.error();
+  merged.fit = std::move(whole.report);
+  merged.pack = *pack;
+  AppendLog(plan, "merged " + std::to_string(plan.tiles.size()) + " tiles into " +
+                      plan.out.string() + ": " + merged.fit.Brief());
+  ReportProgress(progress, "merge", 1.0);
+  return merged;
+}
+
+Status SlurmScriptOptions::Validate() const {
+  if (digitize.empty() || !fs::path(digitize).is_absolute())
+    return Error{"the digitize executable must be an absolute path, got \"" + digitize + "\""};
+  if (cpus_per_task < 1 || cpus_per_task > 4096)
+    return Error{"cpus per task must be in [1, 4096], got " + std::to_string(cpus_per_task)};
+  if (mem_mb < 0) return Error{"memory per job must be >= 0 MB"};
+  if (max_running < 0) return Error{"max running tiles must be >= 0"};
+  for (const std::string* s : {&partition, &time})
+    for (char c : *s)
+      if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' || c == ':' ||
+            c == '.' || c == ','))
+        return Error{"partition and time may hold letters, digits and - _ : . , only, got \"" + *s +
+                     "\""};
+  return Status::Ok();
+}
+
+Result<SlurmScripts> WriteSlurmScripts(const TilePlan& plan, const SlurmScriptOptions& options) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  for (const fs::path& p : {plan.file, plan.work, fs::path(options.digitize)})
+    for (char c : p.string())
+      if (c == '\n' || c == '\r' || c == '\0')
+        return Error{p.string() + ": a path with a line break cannot go into a job script"};
+  if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
+  const fs::path slurm = plan.work / "slurm", logs = plan.work / "logs";
+  std::error_code ec;
+  for (const fs::path& dir : {slurm, logs}) {
+    fs::create_directories(dir, ec);
+    if (ec) return Error{dir.string() + ": cannot create: " + ec.message()};
+  }
+  std::string common;
+  if (!options.partition.empty()) common += "#SBATCH --partition=" + options.partition + "\n";
+  if (!options.time.empty()) common += "#SBATCH --time=" + options.time + "\n";
+  if (options.mem_mb > 0) common += "#SBATCH --mem=" + std::to_string(options.mem_mb) + "M\n";
+  const std::string exe = ShellQuote(options.digitize), file = ShellQuote(plan.file.string());
+  const std::string header = "#!/bin/bash\n# Written by `digitize tiles sbatch` for the plan " +
+                             plan.file.string() + " (id " + plan.id + ").\n";
+  std::string array = Format("0-%zu", plan.tiles.size() - 1);
+  if (options.max_running > 0) array += "%" + std::to_string(options.max_running);
+  const std::string tiles =
+      header + "#SBATCH --job-name=digitize-tiles\n#SBATCH --array=" + array +
+      "\n#SBATCH --cpus-per-task=" + std::to_string(options.cpus_per_task) +
+      "\n#SBATCH --output=" + (logs / "tile_%a.log").string() + "\n" + common +
+      "set -euo pipefail\n"
+      "# A tile already done (a requeued task, a rerun) is skipped.\n"
+      "exec " +
+      exe + " tiles run " + file + " --index \"$SLURM_ARRAY_TASK_ID\" --threads " +
+      std::to_string(options.cpus_per_task) + "\n";
+  const std::string merge = header + "#SBATCH --job-name=digitize-merge\n#SBATCH --cpus-per-task=" +
+                            std::to_string(options.cpus_per_task) +
+                            "\n#SBATCH --output=" + (logs / "merge.log").string() + "\n" + common +
+                            "set -euo pipefail\nexec " + exe + " tiles merge " + file + "\n";
+  const std::string submit =
+      header +
+      "# Submits the tiles as a job array, then the merge to run once every tile succeeded.\n"
+      "set -euo pipefail\n"
+      "tiles=$(sbatch --parsable " +
+      ShellQuote((slurm / "tiles.sbatch").string()) +
+      ")\n"
+      "tiles=${tiles%%;*}\n"
+      "merge=$(sbatch --parsable --dependency=afterok:\"$tiles\" " +
+      ShellQuote((slurm / "merge.sbatch").string()) +
+      ")\n"
+      "merge=${merge%%;*}\n"
+      "echo \"tiles: job $tiles (" +
+      std::to_string(plan.tiles.size()) +
+      " tasks); merge: job $merge, after every tile succeeded\"\n";
+  SlurmScripts scripts{slurm / "tiles.sbatch", slurm / "merge.sbatch", slurm / "submit.sh"};
+  for (const auto& [path, text] : {std::pair{scripts.tiles, tiles}, std::pair{scripts.merge, merge},
+                                   std::pair{scripts.submit, submit}}) {
+    if (Status s = WriteTextFile(path, text); !s.ok()) return Error{s.message()};
+    fs::permissions(path, fs::perms::owner_exec | fs::perms::group_exec | fs::perms::others_exec,
+                    fs::perm_options::add, ec);
+  }
+  return scripts;
+}
+
+}  // namespace digitize

@@ -1,0 +1,405 @@
+// A painting's fit in tiles (tile_plan.h, tile_jobs.h): regions fitted apart equal the whole
+// canvas's fit bit for bit; `digitize tiles plan / run / merge` gives the fit folder `digitize fit`
+// gives, and survives being killed at several moments; the plan file is untrusted input; no
+// output lands on anything the tool did not write. The Slurm run: tests/slurm/.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "digitize/output_dir.h"
+#include "digitize/pipeline.h"
+#include "digitize/reflectance_fit.h"
+#include "digitize/tile_jobs.h"
+#include "digitize/tile_plan.h"
+#include "digitize_synth/painting.h"
+#include "digitize_synth/photo_sim.h"
+#include "digitize_synth/scan_sim.h"
+#include "test_support.h"
+
+namespace digitize {
+namespace {
+
+namespace fs = std::filesystem;
+using test::ReadFileBytes;
+using test::WriteFileBytes;
+
+// Bit for bit: every float of every map, and the per-texel status and model.
+void ExpectSameMaps(const ReflectanceMaps& a, const ReflectanceMaps& b, const std::string& what) {
+  ASSERT_EQ(a.width(), b.width()) << what;
+  ASSERT_EQ(a.height(), b.height()) << what;
+  const size_t n = a.rho_d.size();
+  EXPECT_EQ(0, std::memcmp(a.rho_d.data.data(), b.rho_d.data.data(), n * sizeof(Vec3f))) << what;
+  EXPECT_EQ(0, std::memcmp(a.rho_s.data.data(), b.rho_s.data.data(), n * sizeof(Vec3f))) << what;
+  EXPECT_EQ(0, std::memcmp(a.lobe.data.data(), b.lobe.data.data(), n * 4 * sizeof(float))) << what;
+  EXPECT_EQ(0, std::memcmp(a.fit_error.data.data(), b.fit_error.data.data(), n * sizeof(float)))
+      << what;
+  EXPECT_TRUE(a.status.data == b.status.data) << what;
+  EXPECT_TRUE(a.model.data == b.model.data) << what;
+}
+
+ReflectanceMaps Crop(const ReflectanceMaps& m, const TexelRect& r) {
+  ReflectanceMaps c = ReflectanceMaps::Zeros(r.width, r.height);
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width; ++x) {
+      c.rho_d(x, y) = m.rho_d(r.x + x, r.y + y);
+      c.rho_s(x, y) = m.rho_s(r.x + x, r.y + y);
+      c.lobe(x, y) = m.lobe(r.x + x, r.y + y);
+      c.fit_error(x, y) = m.fit_error(r.x + x, r.y + y);
+      c.status(x, y) = m.status(r.x + x, r.y + y);
+      c.model(x, y) = m.model(r.x + x, r.y + y);
+    }
+  return c;
+}
+
+TEST(TileGrid, CoversTheCanvasOnceRowByRow) {
+  const auto tiles = TileGrid(200, 149, 64);
+  ASSERT_EQ(tiles.size(), 4u * 3u);
+  Grid<int> covered(200, 149, 0);
+  for (const TexelRect& t : tiles)
+    for (int y = t.y; y < t.y + t.height; ++y)
+      for (int x = t.x; x < t.x + t.width; ++x) ++covered(x, y);
+  for (int v : covered.data) ASSERT_EQ(v, 1);
+  EXPECT_EQ(tiles[3], (TexelRect{192, 0, 8, 64}));     // the last column is the remainder
+  EXPECT_EQ(tiles[11], (TexelRect{192, 128, 8, 21}));  // and the last row
+  EXPECT_TRUE(TileGrid(0, 10, 64).empty());
+}
+
+// The core claim: a texel's samples, fit and status are its own, so fitting the canvas in any
+// regions gives the whole fit's maps exactly -- on a painting with relief (shadow and visibility
+// rays cross the regions' borders), regions of odd sizes, and a fit tile (tile_texels) that
+// does not divide them.
+TEST(FitReflectanceRegions, RegionsEqualTheWholeFitBitForBit) {
+  synth::PaintingOptions po;
+  po.resolution_px = 96;
+  po.width_mm = 120;  // 1.25 mm texels under 2.5 mm impasto: shadows and hidden texels
+  po.height_mm = 90;
+  const synth::Painting painting = synth::MakePainting(po);
+  const synth::Scene scene(painting, synth::FrameOptions{});
+  synth::PhotoSimOptions so;
+  so.lights = 16;
+  so.pixels_per_texel = 2.07;
+  const synth::SyntheticPhotoSet photos = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
+  ReflectanceFitOptions options;
+  options.tile_texels = 700;
+  auto whole = FitReflectance(painting.truth, painting.normals, {}, photos.fit, options);
+  ASSERT_TRUE(whole.ok()) << whole.error().message;
+  ASSERT_GT(whole->report.samples.shadowed + whole->report.samples.hidden, 0u)
+      << "the painting must cast shadows for the test to mean anything: "
+      << whole->report.samples.Brief();
+
+  const std::vector<TexelRect> regions =
+      TileGrid(painting.truth.width(), painting.truth.height(), 37);
+  SampleStats summed;
+  size_t calls = 0;
+  const Status s = FitReflectanceRegions(
+      painting.truth, painting.normals, {}, photos.fit, options, regions,
+      [&](size_t r, ReflectanceFitResult&& result) {
+        EXPECT_EQ(r, calls++);
+        ExpectSameMaps(result.maps, Crop(whole->maps, regions[r]), "region " + std::to_string(r));
+        summed += result.report.samples;
+        return Status::Ok();
+      });
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(calls, regions.size());
+  EXPECT_EQ(summed.kept, whole->report.samples.kept);
+  EXPECT_EQ(summed.shadowed, whole->report.samples.shadowed);
+  EXPECT_EQ(summed.hidden, whole->report.samples.hidden);
+
+  // A region outside the canvas is refused, naming it; a failing callback stops the run.
+  const TexelRect outside{90, 0, 20, 10};
+  const Status bad = FitReflectanceRegions(
+      painting.truth, painting.normals, {}, photos.fit, options, std::span(&outside, 1),
+      [](size_t, ReflectanceFitResult&&) { return Status::Ok(); });
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("region 0 (90, 0, 20 x 10)"), std::string::npos) << bad.message();
+  size_t before_stop = 0;
+  const Status stopped =
+      FitReflectanceRegions(painting.truth, painting.normals, {}, photos.fit, options, regions,
+                            [&](size_t, ReflectanceFitResult&&) -> Status {
+                              return ++before_stop == 2 ? Status(Error{"disk full"}) : Status::Ok();
+                            });
+  EXPECT_EQ(stopped.message(), "disk full");
+  EXPECT_EQ(before_stop, 2u);
+}
+
+// --- the command line, on a synthetic painting written to disk once for the suite -----------
+
+struct CliRun {
+  int exit_code = -1;
+  std::string text;
+};
+
+CliRun Cli(const std::string& args) {
+  static int counter = 0;
+  const fs::path log = test::ScratchPath("digitize_tiles_log", std::to_string(counter++));
+  const std::string command =
+      std::string(DIGITIZE_CLI) + " " + args + " > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  CliRun r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.text = ReadFileBytes(log);
+  fs::remove(log);
+  return r;
+}
+
+// `digitize ARGS...` started in the background (no shell): its pid.
+pid_t Spawn(const std::vector<std::string>& args) {
+  std::vector<std::string> all = {DIGITIZE_CLI};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  pid_t pid = 0;
+  EXPECT_EQ(0, posix_spawn(&pid, argv[0], &actions, nullptr, argv.data(), environ));
+  posix_spawn_file_actions_destroy(&actions);
+  return pid;
+}
+
+class TilesCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    data_ = new fs::path(test::FreshScratchDir("digitize_tiles_data"));
+    const fs::path& d = *data_;
+    // A framed painting at 2 mm a texel: 200 x 149 texels, 16 photos; the fit takes ~1 s.
+    CliRun synth = Cli("synth -o " + (d / "synth").string() +
+                       " --resolution 160 --scan-size 400 400 --photos --lights 16");
+    ASSERT_EQ(synth.exit_code, 0) << synth.text;
+    CliRun pre = Cli("preprocess " + (d / "synth/scan.exr").string() + " -o " +
+                     (d / "canvas").string() + " --pitch-mm 2");
+    ASSERT_EQ(pre.exit_code, 0) << pre.text;
+    CliRun fit = Cli("fit --canvas " + (d / "canvas").string() + " --photos " + Photos() + " -o " +
+                     (d / "fit").string());
+    ASSERT_EQ(fit.exit_code, 0) << fit.text;
+    auto maps = ReadReflectanceMaps(d / "fit");
+    ASSERT_TRUE(maps.ok()) << maps.error().message;
+    whole_ = new ReflectanceMaps(std::move(maps).value());
+  }
+  static void TearDownTestSuite() {
+    if (data_) fs::remove_all(*data_);
+    delete data_;
+    delete whole_;
+    data_ = nullptr;
+    whole_ = nullptr;
+  }
+  void SetUp() override {
+    ASSERT_NE(whole_, nullptr) << "the suite's data were not made";
+    dir_ = test::FreshScratchDir("digitize_tiles", test::CurrentTestName());
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  static std::string Photos() { return (*data_ / "synth/photos/calib.json").string(); }
+  static std::string Canvas() { return (*data_ / "canvas").string(); }
+  std::string PlanFile() const { return (dir_ / "painting.plan.json").string(); }
+  std::string Pack() const { return (dir_ / "painting.pack.exr").string(); }
+  CliRun MakePlan(const std::string& extra = "") const {
+    return Cli("tiles plan --canvas " + Canvas() + " --photos " + Photos() + " -o " + Pack() +
+               " --plan " + PlanFile() + " --tile-size 50 " + extra);
+  }
+  void ExpectMergedEqualsWholeFit() const {
+    auto merged = ReadReflectanceMaps(dir_ / "painting.plan.tiles/fit");
+    ASSERT_TRUE(merged.ok()) << merged.error().message;
+    ExpectSameMaps(*merged, *whole_, "merged tiles vs digitize fit");
+    CliRun verify = Cli("verify " + Pack());
+    EXPECT_EQ(verify.exit_code, 0) << verify.text;
+  }
+
+  fs::path dir_;
+  static fs::path* data_;
+  static ReflectanceMaps* whole_;
+};
+fs::path* TilesCli::data_ = nullptr;
+ReflectanceMaps* TilesCli::whole_ = nullptr;
+
+TEST_F(TilesCli, PlanRunMergeGivesTheFitFolderOfDigitizeFit) {
+  CliRun plan = MakePlan();
+  ASSERT_EQ(plan.exit_code, 0) << plan.text;
+  EXPECT_NE(plan.text.find("200 x 149 texels in 12 tiles of 50"), std::string::npos) << plan.text;
+  CliRun status = Cli("tiles status " + PlanFile());
+  EXPECT_EQ(status.exit_code, 2) << status.text;  // nothing done yet
+  EXPECT_NE(status.text.find("0 of 12 tiles done"), std::string::npos) << status.text;
+  CliRun early = Cli("tiles merge " + PlanFile());
+  EXPECT_EQ(early.exit_code, 1);
+  EXPECT_NE(early.text.find("12 of 12 tiles are not done"), std::string::npos) << early.text;
+  EXPECT_FALSE(fs::exists(Pack()));
+
+  // Two tiles as array tasks would run them, then the rest; the two are skipped the second time.
+  CliRun one = Cli("tiles run " + PlanFile() + " --index 3 --index 7");
+  ASSERT_EQ(one.exit_code, 0) << one.text;
+  EXPECT_NE(one.text.find("fitted 2 tiles (3, 7)"), std::string::npos) << one.text;
+  CliRun rest = Cli("tiles run " + PlanFile() + " --all");
+  ASSERT_EQ(rest.exit_code, 0) << rest.text;
+  EXPECT_NE(rest.text.find("fitted 10 tiles"), std::string::npos) << rest.text;
+  EXPECT_NE(rest.text.find("2 done already"), std::string::npos) << rest.text;
+  status = Cli("tiles status " + PlanFile());
+  EXPECT_EQ(status.exit_code, 0) << status.text;
+  CliRun merge = Cli("tiles merge " + PlanFile());
+  ASSERT_EQ(merge.exit_code, 0) << merge.text;
+  ExpectMergedEqualsWholeFit();
+
+  // The merged report counts what the whole fit counted (the texels' statuses, the samples).
+  const std::string whole_report = ReadFileBytes(*data_ / "fit/report.json");
+  const std::string merged_report = ReadFileBytes(dir_ / "painting.plan.tiles/fit/report.json");
+  for (const char* key : {"\"kept\"", "\"shadowed\"", "\"hidden\"", "\"converged\"",
+                          "\"diffuse-only\"", "\"texels_fitted\""}) {
+    const std::regex number(std::string(key) + ": ([0-9]+)");
+    std::smatch a, b;
+    ASSERT_TRUE(std::regex_search(whole_report, a, number)) << key;
+    ASSERT_TRUE(std::regex_search(merged_report, b, number)) << key;
+    EXPECT_EQ(a[1], b[1]) << key;
+  }
+  EXPECT_NE(ReadFileBytes(dir_ / "painting.plan.tiles/run.log").find("tile 11 of 12 fitted"),
+            std::string::npos);
+}
+
+// Killed (SIGKILL: no clean-up) while loading, after its first tile, half-way and while
+// merging: every run after a kill finds only whole tiles, fits the rest, and the merged result
+// is the untiled fit's.
+TEST_F(TilesCli, ResumesAfterAKillAtSeveralMoments) {
+  ASSERT_EQ(MakePlan().exit_code, 0);
+  auto plan = ReadTilePlan(PlanFile());
+  ASSERT_TRUE(plan.ok()) << plan.error().message;
+  const auto done = [&]() {
+    auto status = StatusOfTiles(*plan);
+    return status.ok() ? status->done.size() : size_t{0};
+  };
+  const auto kill_when = [&](const std::vector<std::string>& args,
+                             const std::function<bool()>& ready) {
+    const pid_t pid = Spawn(args);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    int status = 0;
+    bool exited = false;
+    while (!ready() && std::chrono::steady_clock::now() < deadline) {
+      if (waitpid(pid, &status, WNOHANG) == pid) {
+        exited = true;
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (!exited) {
+      kill(pid, SIGKILL);
+      waitpid(pid, &status, 0);
+    }
+  };
+  const std::vector<std::string> run_all = {"tiles", "run", PlanFile(), "--all"};
+  const auto start = std::chrono::steady_clock::now();  // 30 ms in: reading the photos
+  kill_when(run_all, [&] {
+    return std::chrono::steady_clock::now() - start > std::chrono::milliseconds(30);
+  });
+  EXPECT_EQ(done(), 0u);
+  kill_when(run_all, [&] { return done() >= 1; });
+  const size_t after_first = done();
+  EXPECT_GE(after_first, 1u);
+  EXPECT_LT(after_first, 12u) << "the run ended before the kill: the test killed nothing";
+  kill_when(run_all, [&] { return done() >= 6; });
+  EXPECT_GE(done(), 6u);
+  CliRun rest = Cli("tiles run " + PlanFile() + " --all");
+  ASSERT_EQ(rest.exit_code, 0) << rest.text;
+  EXPECT_EQ(done(), 12u);
+  for (const auto& entry : fs::directory_iterator(dir_ / "painting.plan.tiles"))
+    EXPECT_EQ(entry.path().filename().string().find(".partial"), std::string::npos)
+        << "a killed writer's temporary is left: " << entry.path();
+
+  const fs::path fit_marker = dir_ / "painting.plan.tiles/fit" / kOutputMarkerName;
+  kill_when({"tiles", "merge", PlanFile()}, [&] { return fs::exists(fit_marker); });
+  CliRun merge = Cli("tiles merge " + PlanFile());
+  ASSERT_EQ(merge.exit_code, 0) << merge.text;
+  ExpectMergedEqualsWholeFit();
+}
+
+// The plan is a file users keep, edit and share: every field is checked, and an edit that
+// would make tiles disagree (an option, the cut) is caught by the id.
+TEST_F(TilesCli, ThePlanIsUntrustedInput) {
+  ASSERT_EQ(MakePlan("--noise-sigma 0.003 --min-samples 9 --quantised").exit_code, 0);
+  auto plan = ReadTilePlan(PlanFile());
+  ASSERT_TRUE(plan.ok()) << plan.error().message;
+  EXPECT_EQ(plan->fit.fit.noise_sigma, 0.003);
+  EXPECT_EQ(plan->fit.fit.min_samples, 9);
+  EXPECT_EQ(plan->pack.encoding, PackEncoding::kQuantised);
+  EXPECT_EQ(plan->canvas, fs::path(Canvas()));
+  EXPECT_EQ(TilePlanJson(*plan), ReadFileBytes(PlanFile()));  // the round trip is exact
+
+  const std::string good = ReadFileBytes(PlanFile());
+  const auto refused = [&](const std::string& text, const std::string& expected) {
+    WriteFileBytes(PlanFile(), text);
+    auto r = ReadTilePlan(PlanFile());
+    ASSERT_FALSE(r.ok()) << "accepted: " << expected;
+    EXPECT_NE(r.error().message.find(PlanFile()), std::string::npos) << r.error().message;
+    EXPECT_NE(r.error().message.find(expected), std::string::npos) << r.error().message;
+    CliRun run = Cli("tiles run " + PlanFile() + " --all");
+    EXPECT_EQ(run.exit_code, 1) << run.text;
+    EXPECT_FALSE(fs::exists(dir_ / "painting.plan.tiles"))
+        << "a refused plan wrote its work folder";
+  };
+  const auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string t = good;
+    const size_t at = t.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return t.replace(at, from.size(), to);
+  };
+  refused(replaced("\"noise_sigma\": 0.003", "\"noise_sigma\": 0.004"), "does not match");
+  refused(replaced("\"tile_size\": 50", "\"tile_size\": 60"), "tiles");
+  refused(replaced("\"tile_size\": 50", "\"tile_size\": 2"), "tile_size");
+  refused(replaced("\"format\": \"digitize.tile_plan\"", "\"format\": \"other\""),
+          "not a tile plan");
+  refused(replaced("\"version\": 1", "\"version\": 7"), "version 7");
+  refused(replaced("\"canvas\": \"/", "\"canvas\": \""), "absolute path");
+  refused(replaced("\"noise_sigma\": 0.003", "\"noise_sigma\": -1"), "noise_sigma");
+  refused(replaced("\"canvas_size\": [", "\"canvas_size\": [1e9, "), "canvas_size");
+  refused(good.substr(0, good.size() / 2), "not valid JSON");
+  refused(replaced("\"tiles\": [", "\"extra\": 1, \"tiles\": ["), "extra");
+  WriteFileBytes(PlanFile(), good);
+  CliRun bad_index = Cli("tiles run " + PlanFile() + " --index 12");
+  EXPECT_EQ(bad_index.exit_code, 1);
+  EXPECT_NE(bad_index.text.find("no tile 12 (the plan has 12, 0 to 11)"), std::string::npos)
+      << bad_index.text;
+}
+
+// Outputs never land on what the tool did not write.
+TEST_F(TilesCli, NeverWritesOverWhatItDidNotWrite) {
+  // A work folder of the user's, not empty: refused at once, untouched.
+  fs::create_directories(dir_ / "mine");
+  WriteFileBytes(dir_ / "mine/notes.txt", "keep me");
+  ASSERT_EQ(MakePlan("--work " + (dir_ / "mine").string()).exit_code, 0);
+  CliRun run = Cli("tiles run " + PlanFile() + " --all");
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_NE(run.text.find("is not a tile plan's work folder"), std::string::npos) << run.text;
+  EXPECT_EQ(ReadFileBytes(dir_ / "mine/notes.txt"), "keep me");
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir_ / "mine"), fs::directory_iterator{}), 1);
+
+  // A plan file over a file that is not a plan; a plan, work folder or pack on an input.
+  WriteFileBytes(dir_ / "list.json", "[1, 2, 3]");
+  CliRun over = Cli("tiles plan --canvas " + Canvas() + " --photos " + Photos() + " -o " + Pack() +
+                    " --plan " + (dir_ / "list.json").string());
+  EXPECT_EQ(over.exit_code, 1);
+  EXPECT_NE(over.text.find("is not a tile plan: not replaced"), std::string::npos) << over.text;
+  EXPECT_EQ(ReadFileBytes(dir_ / "list.json"), "[1, 2, 3]");
+  const std::string calib_before = ReadFileBytes(Photos());
+  CliRun on_input = Cli("tiles plan --canvas " + Canvas() + " --photos " + Photos() + " -o " +
+                        Pack() + " --plan " + Photos());
+  EXPECT_EQ(on_input.exit_code, 1) << on_input.text;
+  EXPECT_EQ(ReadFileBytes(Photos()), calib_before);
+  CliRun work_on_input = Cli("tiles plan --canvas " + Canvas() + " --photos " + Photos() + " -o " +
+                             Pack() + " --plan " + PlanFile() + " --work " + Canvas());
+  EXPECT_EQ(work_on_input.exit_code, 1) << work_on_input.text;
+  CliRun pack_on_input =
+      Cli("tiles plan --canvas " + Canvas() + " --photos " + Photos() + " -o " +
+          (fs::path(Canvas()) / "height.exr").string() + " --plan " + PlanFile());
+  EXPECT_EQ(pack_on_input.exit_code, 1) << pack_on_input.text;
+}
+
+}  // namespace
+}  // namespace digitize
