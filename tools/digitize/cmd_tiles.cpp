@@ -37,8 +37,6 @@ int RunBash(const std::filesystem::path& script) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-Result<TilePlan> Plan(const std::string& file) { return ReadTilePlan(file); }
-
 void AddPlan(CLI::App* tiles, int& exit_code) {
   struct Args {
     TilePlanOptions plan;
@@ -121,7 +119,7 @@ void AddRun(CLI::App* tiles, int& exit_code) {
       exit_code = Fail("tiles run", "say which tiles: --index I or --all");
       return;
     }
-    auto plan = Plan(args->plan);
+    auto plan = ReadTilePlan(args->plan);
     if (!plan.ok()) {
       exit_code = Fail("tiles run", plan.error().message);
       return;
@@ -148,7 +146,7 @@ void AddStatus(CLI::App* tiles, int& exit_code) {
       "status", "Which tiles of a plan are done. Exit 0 when every tile is done, 2 otherwise.");
   c->add_option("plan", *plan_file, "Plan file")->required();
   c->callback([plan_file, &exit_code] {
-    auto plan = Plan(*plan_file);
+    auto plan = ReadTilePlan(*plan_file);
     if (!plan.ok()) {
       exit_code = Fail("tiles status", plan.error().message);
       return;
@@ -171,7 +169,7 @@ void AddMerge(CLI::App* tiles, int& exit_code) {
       "atomically, never over an input).");
   c->add_option("plan", *plan_file, "Plan file")->required();
   c->callback([plan_file, &exit_code] {
-    auto plan = Plan(*plan_file);
+    auto plan = ReadTilePlan(*plan_file);
     if (!plan.ok()) {
       exit_code = Fail("tiles merge", plan.error().message);
       return;
@@ -214,7 +212,7 @@ void AddSbatch(CLI::App* tiles, int& exit_code) {
       ->capture_default_str();
   c->add_flag("--submit", args->submit, "Run submit.sh: sbatch the array, then the merge");
   c->callback([args, &exit_code] {
-    auto plan = Plan(args->plan);
+    auto plan = ReadTilePlan(args->plan);
     if (!plan.ok()) {
       exit_code = Fail("tiles sbatch", plan.error().message);
       return;
