@@ -2,7 +2,10 @@
 // photographed under 64 point lights (8-bit sRGB PNGs written to disk and read back, as a user has
 // them), fitted on its true canvas. Reports, side by side, the time of each part and the
 // relighting error on held-out lights and views (PSNR against the noise-free truth renders):
-//   - the whole fit: photo decoding + samples + rays + fit + writing the maps;
+//   - the whole fit: photo decoding + samples + rays + fit + writing the maps, by today's path
+//     (camera work and view rays per camera position, rays the horizon bounds prove free not
+//     traced) and by the per-photo path before it (share_view_rays = false), in the same run,
+//     with whether their maps are bit-identical;
 //   - samples with and without skipping the rays that cannot be blocked (ray counts);
 //   - fit time per texel, fast path vs ceres::Solve, on the same crop of the canvas (ceres::Solve
 //     on the full canvas would take minutes), with the held-out PSNR of each on that crop.
@@ -13,6 +16,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -149,6 +153,26 @@ int main(int argc, char** argv) {
   whole.seconds_write = seconds_write;
   whole.seconds_total = seconds_load + fast->report.seconds_total + seconds_write;
   rows.push_back(whole);
+  // 1b. The per-photo path (before issue 14 part 5): same photos, same writing cost.
+  ReflectanceFitOptions per_photo = options;
+  per_photo.samples.share_view_rays = false;
+  auto before = FitReflectance(canvas, normals, {}, *set, per_photo);
+  if (!before.ok()) return 1;
+  Row old = Describe(
+      "whole fit: per-photo path", *before, set->photos.size(),
+      *EvaluateHeldOut(canvas, normals, before->maps, {}, truth.held_out, truth.held_out_mask));
+  old.seconds_load = seconds_load;
+  old.seconds_write = seconds_write;
+  old.seconds_total = seconds_load + before->report.seconds_total + seconds_write;
+  rows.push_back(old);
+  const auto same = [](const auto& a, const auto& b) {
+    return a.data.size() == b.data.size() &&
+           std::memcmp(a.data.data(), b.data.data(), a.data.size() * sizeof(a.data[0])) == 0;
+  };
+  const ReflectanceMaps &mn = fast->maps, &mo = before->maps;
+  const bool identical = same(mn.rho_d, mo.rho_d) && same(mn.rho_s, mo.rho_s) &&
+                         same(mn.lobe, mo.lobe) && same(mn.fit_error, mo.fit_error) &&
+                         same(mn.status, mo.status) && same(mn.model, mo.model);
 
   // 2. The same without skipping rays.
   ReflectanceFitOptions no_skip = options;
@@ -187,15 +211,22 @@ int main(int argc, char** argv) {
                 r.config.c_str(), r.texels, r.seconds_load, r.seconds_samples, r.seconds_fit,
                 r.seconds_total, r.us_per_texel_fit, r.rays / 1e6,
                 r.rays ? 100.0 * r.rays_skipped / r.rays : 0.0, r.psnr_db, r.rmse);
-  const Row& f = rows[3];
-  const Row& c = rows[4];
+  const Row& f = rows[4];
+  const Row& c = rows[5];
   std::printf(
       "\nfast vs ceres::Solve on the crop: %.1fx faster per texel (%.2f vs %.2f us), PSNR "
       "%.2f vs %.2f dB\n",
       c.us_per_texel_fit / f.us_per_texel_fit, f.us_per_texel_fit, c.us_per_texel_fit, f.psnr_db,
       c.psnr_db);
+  std::printf(
+      "shared views + horizons vs the per-photo path: samples %.2f s vs %.2f s (%.2fx), fit %.2f "
+      "vs %.2f s, total %.2f vs %.2f s (%.2fx); PSNR %.4f vs %.4f dB; maps %s\n",
+      rows[0].seconds_samples, rows[1].seconds_samples,
+      rows[1].seconds_samples / rows[0].seconds_samples, rows[0].seconds_fit, rows[1].seconds_fit,
+      rows[0].seconds_total, rows[1].seconds_total, rows[1].seconds_total / rows[0].seconds_total,
+      rows[0].psnr_db, rows[1].psnr_db, identical ? "bit-identical" : "DIFFER");
   std::printf("ray skipping: samples %.2f s vs %.2f s without (%.1fx)\n", rows[0].seconds_samples,
-              rows[1].seconds_samples, rows[1].seconds_samples / rows[0].seconds_samples);
+              rows[2].seconds_samples, rows[2].seconds_samples / rows[0].seconds_samples);
   std::printf("whole fit: %s\n", rows[0].brief.c_str());
 
   if (!csv_dir.empty()) {

@@ -12,7 +12,7 @@ set grid
 set key bottom right
 set yrange [30:45]
 set xrange [1:10000]
-plot "docs/bench_fit.csv" every ::3::4 using 13:14:1 with labels point pt 7 ps 1.5 offset 1,0.6 left notitle
+plot "docs/bench_fit.csv" every ::4::5 using 13:14:1 with labels point pt 7 ps 1.5 offset 1,0.6 left notitle
 unset logscale
 set autoscale
 set title "Where the time goes, 1 Mtexel x 64 photos"
@@ -24,8 +24,8 @@ set ylabel "seconds"
 set xlabel ""
 set key top right
 set xtics rotate by -20
-plot "docs/bench_fit.csv" every ::0::2 using 8:xtic(1) title "load photos", \
-     "" every ::0::2 using 9 title "samples + rays", \
-     "" every ::0::2 using 10 title "fit", \
-     "" every ::0::2 using 11 title "write maps"
+plot "docs/bench_fit.csv" every ::0::3 using 8:xtic(1) title "load photos", \
+     "" every ::0::3 using 9 title "samples + rays", \
+     "" every ::0::3 using 10 title "fit", \
+     "" every ::0::3 using 11 title "write maps"
 unset multiplot

@@ -69,6 +69,7 @@ set(DIGITIZE_SAMPLES_SOURCES
   height_field_tracer.cpp  # Embree
   relight.cpp
   reflectance_samples.cpp
+  shadow_horizon.cpp  # per-texel horizon bounds: rays proven free without the tracer
   reflectance_fit.cpp
   photo_residuals.cpp  # OpenCV (phase correlation): per-photo gain and misregistration
 )

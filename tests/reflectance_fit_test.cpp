@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -429,6 +430,130 @@ TEST(ReflectanceFit, ShadowRaysRejectExactlyTheAnalyticShadow) {
       EXPECT_GT(stats.light_rays.skipped, 0u);
     } else {
       EXPECT_EQ(stats.light_rays.skipped, 0u);
+    }
+  }
+}
+
+// Relief (ridges, a 3 mm block with steep walls), a frame box on the left, two tilted cameras
+// with four photos each (point lights low enough to cast shadows, one directional), pixels of
+// random colour: what the camera alone decides is computed once per camera position
+// (SampleOptions::share_view_rays) and the horizon bounds skip most rays, yet every sample,
+// every map and every rejection count equals the per-photo path's, with and without pixel maps.
+TEST(ReflectanceSamples, SharedViewsAndHorizonsGiveExactlyThePerPhotoSamples) {
+  const int w = 48, h = 40;
+  HeightField canvas = FlatCanvas(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      canvas.height_mm(x, y) = static_cast<float>(0.4 * std::sin(0.7 * x) * std::cos(0.45 * y) +
+                                                  (x >= 20 && x < 26 && y >= 14 && y < 22 ? 3 : 0));
+  canvas.frame.raise_mm = {4.0f, 0.0f, 0.0f, 0.0f};
+  canvas.frame.width_mm = {3.0f, 0.0f, 0.0f, 0.0f};
+  // Normals by central differences (canvas frame; texel y grows as Y falls).
+  Grid<Vec3f> normals(w, h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const auto z = [&](int i, int j) {
+        return canvas.height_mm(std::clamp(i, 0, w - 1), std::clamp(j, 0, h - 1));
+      };
+      const float dzdx = (z(x + 1, y) - z(x - 1, y)) / (2 * kPitch);
+      const float dzdy = -(z(x, y + 1) - z(x, y - 1)) / (2 * kPitch);
+      normals(x, y) = Vec3f(-dzdx, -dzdy, 1).normalized();
+    }
+  PhotoSet set;
+  set.source = "relief.json";
+  uint32_t seed = 12345;
+  const auto random = [&seed] {
+    seed = seed * 1664525u + 1013904223u;
+    return static_cast<float>(seed >> 8) / static_cast<float>(1u << 24);
+  };
+  for (int c = 0; c < 2; ++c) {
+    const double a = (c ? -35.0 : 30.0) * M_PI / 180.0;
+    Camera cam;
+    cam.model = CameraModel::kOrthographic;
+    cam.width = 52;
+    cam.height = 44;
+    cam.pixel_pitch_mm = 0.9 * kPitch;
+    cam.cx = (cam.width - 1) / 2.0;
+    cam.cy = (cam.height - 1) / 2.0;
+    cam.camera_from_scan.rotation << std::cos(a), 0, std::sin(a), 0, -1, 0, std::sin(a), 0,
+        -std::cos(a);
+    const Vec3d centre(w * kPitch / 2, h * kPitch / 2, 0);
+    cam.camera_from_scan.translation =
+        -(cam.camera_from_scan.rotation * centre) + Vec3d(0, 0, 1000);
+    for (int i = 0; i < 4; ++i) {
+      Photo p;
+      p.entry = "relief.json: images[" + std::to_string(4 * c + i) + "]";
+      p.camera = cam;
+      if (i == 3) {
+        p.light = Directional(25, 200);
+      } else {
+        const double e = (12.0 + 10.0 * i) * M_PI / 180, az = (90.0 * i + 40.0 * c) * M_PI / 180;
+        p.light.type = LightType::kPoint;
+        p.light.position_mm = centre + 60.0 * Vec3d(std::cos(e) * std::cos(az),
+                                                    std::cos(e) * std::sin(az), std::sin(e));
+        p.light.intensity = Vec3f::Constant(3600.0f);
+      }
+      p.encoding = ColourEncoding::kLinear;
+      p.rgb = Grid<Vec3f>(cam.width, cam.height);
+      for (Vec3f& v : p.rgb.data) v = Vec3f(random(), random(), random());
+      set.photos.push_back(std::move(p));
+    }
+  }
+  auto tracer = HeightFieldTracer::Build(canvas);
+  ASSERT_TRUE(tracer.ok()) << tracer.error().message;
+  const PixelTexelMaps maps = MapPixelsToTexels(set, canvas, RigidTransform{}, *tracer);
+  std::vector<uint32_t> texels(static_cast<size_t>(w * h));
+  for (size_t t = 0; t < texels.size(); ++t) texels[t] = static_cast<uint32_t>(t);
+  for (bool with_maps : {false, true}) {
+    const SampleScene scene{&canvas, &normals, RigidTransform{},
+                            &set,    &*tracer, with_maps ? &maps : nullptr};
+    ASSERT_TRUE(ValidateSampleScene(scene).ok());
+    const auto gather = [&](bool share, int sectors, SampleStats& stats) {
+      SampleOptions o;
+      o.share_view_rays = share;
+      o.horizon_sectors = sectors;
+      BrdfSamples samples;
+      GatherSamples(scene, texels, o, samples, stats);
+      return samples;
+    };
+    SampleStats before;
+    const BrdfSamples reference = gather(false, 0, before);
+    // The scene must exercise what is compared: shadows, hidden texels (from the relief and the
+    // frame) and several rejections.
+    EXPECT_GT(before.shadowed, 100u);
+    if (!with_maps) {
+      EXPECT_GT(before.hidden, 10u);
+    }
+    EXPECT_GT(before.facing_away + before.light_below_horizon, 0u);
+    size_t traced_without_horizon = 0;
+    for (int sectors : {0, 4, 16, 32}) {
+      SampleStats stats;
+      const BrdfSamples samples = gather(true, sectors, stats);
+      ASSERT_EQ(samples.texel_begin, reference.texel_begin) << sectors << " " << with_maps;
+      for (size_t k = 0; k < samples.samples.size(); ++k) {
+        const BrdfSample& a = samples.samples[k];
+        const BrdfSample& b = reference.samples[k];
+        ASSERT_TRUE(a.view_dir == b.view_dir && a.light_dir == b.light_dir &&
+                    a.radiance == b.radiance && a.irradiance == b.irradiance)
+            << "sample " << k << ", " << sectors << " sectors, maps " << with_maps;
+      }
+      for (const auto& [n, m] :
+           {std::pair{stats.behind_camera, before.behind_camera},
+            std::pair{stats.outside_image, before.outside_image},
+            std::pair{stats.facing_away, before.facing_away},
+            std::pair{stats.light_below_horizon, before.light_below_horizon},
+            std::pair{stats.black, before.black}, std::pair{stats.hidden, before.hidden},
+            std::pair{stats.shadowed, before.shadowed},
+            std::pair{stats.stepped_over, before.stepped_over}, std::pair{stats.kept, before.kept}})
+        EXPECT_EQ(n, m) << sectors << " sectors, maps " << with_maps;
+      EXPECT_EQ(stats.light_rays.rays, before.light_rays.rays);
+      if (sectors == 0) {
+        traced_without_horizon = stats.light_rays.traced;
+      } else {
+        // The horizon proves rays free without the tracer (few here: most texels are within
+        // reach of the block or the frame, under lights 12-32 degrees high).
+        EXPECT_LT(stats.light_rays.traced, traced_without_horizon) << sectors;
+      }
     }
   }
 }

@@ -454,6 +454,8 @@ nlohmann::json ToJson(const ReflectanceFitOptions& options) {
           {"shadow_rays", options.samples.shadow_rays},
           {"visibility_rays", options.samples.visibility_rays},
           {"skip_unblockable", options.samples.trace.skip_unblockable},
+          {"share_view_rays", options.samples.share_view_rays},
+          {"horizon_sectors", options.samples.horizon_sectors},
           {"dark_outlier_ratio", options.dark_outlier_ratio},
           {"dark_outlier_sigmas", options.dark_outlier_sigmas}};
 }

@@ -8,10 +8,12 @@
 #include <cstdio>
 #include <limits>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include "camera_rays.h"
 #include "digitize/tangent_frame.h"
+#include "shadow_horizon.h"
 
 namespace digitize {
 namespace {
@@ -81,46 +83,280 @@ PixelSample Bilinear(const Photo& photo, double u, double v) {
 constexpr int kMaxFootprintSide = 8;
 constexpr double kParallaxMarginPx = 1.0;
 
-PixelSample Footprint(const Photo& photo, const Eigen::Vector2d& px, const Eigen::Matrix2d& j,
-                      const Grid<uint32_t>* owner = nullptr, uint32_t texel = kNoTexel) {
+// Which pixels a texel's sample averages: what depends on the camera alone, so that photos of one
+// camera position share it (Camera::SameView). `pixels` (y * width + x, in the order summed)
+// are appended to the caller's list; none: the bilinear value at `px`.
+struct FootprintPixels {
+  Eigen::Vector2d px = Eigen::Vector2d::Zero();
+  uint32_t first = 0, count = 0;  // in the caller's pixel list
+  bool seen = false, stepped_over = false;
+};
+
+FootprintPixels Footprint(int w, int h, const Eigen::Vector2d& px, const Eigen::Matrix2d& j,
+                          const Grid<uint32_t>* owner, uint32_t texel,
+                          std::vector<uint32_t>& pixels) {
+  FootprintPixels f;
+  f.px = px;
+  f.first = static_cast<uint32_t>(pixels.size());
   const double det = j.determinant();
-  if (!(std::abs(det) > 1e-12) || !std::isfinite(det)) return Bilinear(photo, px.x(), px.y());
+  if (!(std::abs(det) > 1e-12) || !std::isfinite(det)) return f;
   const Eigen::Matrix2d inv = j.inverse();
   const double margin = owner ? kParallaxMarginPx : 0.0;
   const double ex = 0.5 * (std::abs(j(0, 0)) + std::abs(j(0, 1))) + margin;
   const double ey = 0.5 * (std::abs(j(1, 0)) + std::abs(j(1, 1))) + margin;
-  const int w = photo.rgb.width, h = photo.rgb.height;
   const int x0 = std::max(0, static_cast<int>(std::ceil(px.x() - ex)));
   const int x1 = std::min(w - 1, static_cast<int>(std::floor(px.x() + ex)));
   const int y0 = std::max(0, static_cast<int>(std::ceil(px.y() - ey)));
   const int y1 = std::min(h - 1, static_cast<int>(std::floor(px.y() + ey)));
   const int step = 1 + std::max(x1 - x0, y1 - y0) / kMaxFootprintSide;
-  PixelSample s;
-  int n = 0, in_cell = 0;
+  int in_cell = 0;
   for (int y = y0; y <= y1; y += step)
     for (int x = x0; x <= x1; x += step) {
       const Eigen::Vector2d o = inv * Eigen::Vector2d(x - px.x(), y - px.y());
       const bool inside = o.x() >= -0.5 && o.x() < 0.5 && o.y() >= -0.5 && o.y() < 0.5;
       in_cell += inside;
       if (owner ? (*owner)(x, y) != texel : !inside) continue;
-      s.rgb += photo.rgb(x, y);
-      if (!photo.flags.empty()) s.flags |= photo.flags(x, y);
-      ++n;
+      pixels.push_back(static_cast<uint32_t>(y) * static_cast<uint32_t>(w) +
+                       static_cast<uint32_t>(x));
     }
-  if (n == 0) {
-    // No pixel sees the texel: its cell's pixels see a neighbour (relief parallax, a steep wall
-    // foreshortened to less than a pixel; or it is hidden, which the view ray decides), or no
-    // pixel centre falls in its cell although the photo resolves the grid (an oblique view steps
-    // over it). The bilinear value is then its neighbours' paint as much as its own: such a
-    // sample is marked, and dropped where the texel has enough others
-    // (SampleOptions::min_direct_samples). A photo coarser than the grid keeps it unmarked.
-    PixelSample b = Bilinear(photo, px.x(), px.y());
-    b.stepped_over = owner && (in_cell > 0 || std::abs(det) >= 1.0);
+  f.count = static_cast<uint32_t>(pixels.size()) - f.first;
+  // No pixel sees the texel: its cell's pixels see a neighbour (relief parallax, a steep wall
+  // foreshortened to less than a pixel; or it is hidden, which the view ray decides), or no
+  // pixel centre falls in its cell although the photo resolves the grid (an oblique view steps
+  // over it). The bilinear value is then its neighbours' paint as much as its own: such a
+  // sample is marked, and dropped where the texel has enough others
+  // (SampleOptions::min_direct_samples). A photo coarser than the grid keeps it unmarked.
+  if (f.count == 0) f.stepped_over = owner && (in_cell > 0 || std::abs(det) >= 1.0);
+  f.seen = f.count > 0 && owner != nullptr;
+  return f;
+}
+
+// One photo's sample over the pixels of `f`.
+PixelSample Average(const Photo& photo, const FootprintPixels& f,
+                    const std::vector<uint32_t>& pixels) {
+  if (f.count == 0) {
+    PixelSample b = Bilinear(photo, f.px.x(), f.px.y());
+    b.stepped_over = f.stepped_over;
     return b;
   }
-  s.rgb /= static_cast<float>(n);
-  s.seen = owner != nullptr;
+  PixelSample s;
+  for (uint32_t k = f.first; k < f.first + f.count; ++k) {
+    s.rgb += photo.rgb.data[pixels[k]];
+    if (!photo.flags.empty()) s.flags |= photo.flags.data[pixels[k]];
+  }
+  s.rgb /= static_cast<float>(f.count);
+  s.seen = f.seen;
   return s;
+}
+
+// Per texel: surface point (canvas and scan frames) and tangent frame, shared by every photo.
+struct TexelGeometry {
+  Vec3d p_canvas, p_scan;
+  TangentFrame frame;
+};
+
+// What one camera position makes of a texel, shared by the photos taken from it: the camera's
+// own rejections, the view direction, the footprint's pixels, and whether the relief hides it.
+struct ViewTexel {
+  enum Reject : uint8_t { kNone, kBehindCamera, kOutsideImage, kFacingAway };
+  Reject reject = kNone;
+  bool hidden = false;
+  Vec3f view_local = Vec3f::Zero(), view_canvas = Vec3f::Zero();
+  FootprintPixels footprint;
+};
+
+// GatherSamples with SampleOptions::share_view_rays: per camera position (Camera::SameView) the
+// camera's tests, footprints and view rays once, then per photo of it the light's tests, the
+// pixel averages and the shadow rays. Rays the horizon proves free are not traced. Fills slots /
+// keep exactly as the per-photo path does (reflectance_fit_test compares them).
+void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
+                   const SampleOptions& options, const std::vector<TexelGeometry>& geometry,
+                   std::vector<BrdfSample>& slots, std::vector<uint8_t>& keep, SampleStats& stats,
+                   bool parallel) {
+  const std::vector<Photo>& photos = scene.photos->photos;
+  const size_t n_texels = texels.size(), n_photos = photos.size();
+  const RigidTransform scan_from_canvas = scene.canvas_from_scan.Inverse();
+  const Mat3d& canvas_rot = scene.canvas_from_scan.rotation;
+  const double pitch = scene.canvas->pitch_mm;
+  const Vec3d texel_step_x = scan_from_canvas.rotation * Vec3d(pitch, 0, 0);
+  const Vec3d texel_step_y = scan_from_canvas.rotation * Vec3d(0, -pitch, 0);
+  std::optional<HorizonBounds> horizon;
+  if (options.horizon_sectors > 0 && options.trace.skip_unblockable &&
+      (options.shadow_rays || options.visibility_rays))
+    horizon.emplace(*scene.canvas, texels, options.horizon_sectors);
+  const auto free = [&](size_t t, const Vec3f& d) { return horizon && horizon->ProvenFree(t, d); };
+  const auto for_each = [&](size_t n, const auto& body) {
+    if (parallel)
+      tbb::parallel_for(size_t{0}, n, body);
+    else
+      for (size_t i = 0; i < n; ++i) body(i);
+  };
+
+  std::vector<std::vector<size_t>> views;  // photo indices per camera position, in set order
+  for (size_t i = 0; i < n_photos; ++i) {
+    size_t k = 0;
+    while (k < views.size() && !photos[views[k][0]].camera.SameView(photos[i].camera)) ++k;
+    if (k == views.size()) views.emplace_back();
+    views[k].push_back(i);
+  }
+  // Footprint pixels per chunk of texels, so that chunks fill them in parallel.
+  constexpr size_t kChunk = 1024;
+  std::vector<std::vector<uint32_t>> chunk_pixels((n_texels + kChunk - 1) / kChunk);
+  std::vector<ViewTexel> view(n_texels);
+  std::mutex stats_mutex;
+  for (const std::vector<size_t>& of_view : views) {
+    const Camera& camera = photos[of_view[0]].camera;
+    const Grid<uint32_t>* owner =
+        scene.pixel_texels ? &scene.pixel_texels->maps[scene.pixel_texels->of_photo[of_view[0]]]
+                           : nullptr;
+    for_each(chunk_pixels.size(), [&](size_t c) {
+      std::vector<uint32_t>& pixels = chunk_pixels[c];
+      pixels.clear();
+      for (size_t t = c * kChunk; t < std::min(n_texels, (c + 1) * kChunk); ++t) {
+        ViewTexel& vt = view[t];
+        vt = ViewTexel{};
+        const TexelGeometry& g = geometry[t];
+        if (!camera.InFront(g.p_scan)) {
+          vt.reject = ViewTexel::kBehindCamera;
+          continue;
+        }
+        const Eigen::Vector2d px = camera.Project(g.p_scan);
+        if (!camera.InImage(px)) {
+          vt.reject = ViewTexel::kOutsideImage;
+          continue;
+        }
+        const Vec3d v_canvas = canvas_rot * camera.DirectionToCamera(g.p_scan);
+        const Vec3d v_local = g.frame.ToLocal(v_canvas);
+        if (!(v_local.z() > options.min_cos)) {
+          vt.reject = ViewTexel::kFacingAway;
+          continue;
+        }
+        vt.view_local = v_local.cast<float>();
+        vt.view_canvas = v_canvas.cast<float>();
+        Eigen::Matrix2d jacobian;
+        jacobian.col(0) = camera.Project(g.p_scan + texel_step_x) - px;
+        jacobian.col(1) = camera.Project(g.p_scan + texel_step_y) - px;
+        vt.footprint =
+            Footprint(camera.width, camera.height, px, jacobian, owner, texels[t], pixels);
+      }
+    });
+    if (options.visibility_rays) {
+      // One ray per texel the camera sees and no pixel map vouches for, for all its photos.
+      const Vec3d centre = camera.CentreInScan();
+      std::vector<uint32_t> ray_of;
+      std::vector<Vec3f> origins, directions;
+      std::vector<float> far;
+      size_t proven = 0;
+      for (size_t t = 0; t < n_texels; ++t) {
+        const ViewTexel& vt = view[t];
+        if (vt.reject != ViewTexel::kNone || vt.footprint.seen) continue;
+        if (free(t, vt.view_canvas)) {
+          ++proven;
+          continue;
+        }
+        ray_of.push_back(static_cast<uint32_t>(t));
+        origins.push_back(geometry[t].p_canvas.cast<float>());
+        directions.push_back(vt.view_canvas);
+        far.push_back(camera.model == CameraModel::kPinhole
+                          ? static_cast<float>((centre - geometry[t].p_scan).norm())
+                          : std::numeric_limits<float>::infinity());
+      }
+      std::vector<uint8_t> blocked(ray_of.size(), 0);
+      scene.tracer->Occluded(origins, directions, far, blocked, options.trace, &stats.view_rays);
+      for (size_t j = 0; j < ray_of.size(); ++j) view[ray_of[j]].hidden = blocked[j];
+      stats.view_rays.rays += proven;
+      stats.view_rays.skipped += proven;
+    }
+
+    for_each(of_view.size(), [&](size_t v) {
+      const size_t i = of_view[v];
+      const Photo& photo = photos[i];
+      const Light& light = photo.light;
+      SampleStats local;
+      local.candidates = n_texels;
+      std::vector<uint32_t> ray_of;  // texel of each shadow ray
+      std::vector<uint8_t> ray_keep;
+      std::vector<Vec3f> origins, directions;
+      std::vector<float> far;
+      size_t proven = 0;
+      for (size_t t = 0; t < n_texels; ++t) {
+        const ViewTexel& vt = view[t];
+        switch (vt.reject) {
+          case ViewTexel::kBehindCamera:
+            ++local.behind_camera;
+            continue;
+          case ViewTexel::kOutsideImage:
+            ++local.outside_image;
+            continue;
+          case ViewTexel::kFacingAway:
+            ++local.facing_away;
+            continue;
+          case ViewTexel::kNone:
+            break;
+        }
+        const TexelGeometry& g = geometry[t];
+        const Vec3d l_canvas = canvas_rot * light.DirectionTo(g.p_scan);
+        const Vec3d l_local = g.frame.ToLocal(l_canvas);
+        if (!(l_local.z() > options.min_cos)) {
+          ++local.light_below_horizon;
+          continue;
+        }
+        const PixelSample pixel = Average(photo, vt.footprint, chunk_pixels[t / kChunk]);
+        if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
+          ++local.non_finite;
+          continue;
+        }
+        if (pixel.flags & kPixelSaturated) {
+          ++local.saturated;
+          continue;
+        }
+        if (options.reject_black && pixel.rgb.maxCoeff() <= options.black_level) {
+          ++local.black;
+          continue;
+        }
+        if (vt.hidden) {
+          ++local.hidden;
+          continue;
+        }
+        BrdfSample& s = slots[i * n_texels + t];
+        s.view_dir = vt.view_local;
+        s.light_dir = l_local.cast<float>();
+        s.radiance = pixel.rgb;
+        s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
+        const uint8_t kept = pixel.stepped_over ? kKeepInterpolated : kKeepDirect;
+        if (options.shadow_rays) {
+          const Vec3f l = l_canvas.cast<float>();
+          if (!free(t, l)) {
+            ray_of.push_back(static_cast<uint32_t>(t));
+            ray_keep.push_back(kept);
+            origins.push_back(g.p_canvas.cast<float>());
+            directions.push_back(l);
+            far.push_back(light.type == LightType::kPoint
+                              ? static_cast<float>((light.position_mm - g.p_scan).norm())
+                              : std::numeric_limits<float>::infinity());
+            continue;
+          }
+          ++proven;
+        }
+        keep[i * n_texels + t] = kept;
+        ++local.kept;
+      }
+      std::vector<uint8_t> blocked(ray_of.size(), 0);
+      scene.tracer->Occluded(origins, directions, far, blocked, options.trace, &local.light_rays);
+      for (size_t j = 0; j < ray_of.size(); ++j) {
+        if (blocked[j]) {
+          ++local.shadowed;
+        } else {
+          keep[i * n_texels + ray_of[j]] = ray_keep[j];
+          ++local.kept;
+        }
+      }
+      local.light_rays.rays += proven;
+      local.light_rays.skipped += proven;
+      std::lock_guard lock(stats_mutex);
+      stats += local;
+    });
+  }
 }
 
 }  // namespace
@@ -174,6 +410,9 @@ Status SampleOptions::Validate() const {
     return Error{"black_level must be in [0, 1) (linear), got " + FormatNumber(black_level)};
   if (min_direct_samples < 0)
     return Error{"min_direct_samples must be >= 0, got " + std::to_string(min_direct_samples)};
+  if (horizon_sectors < 0 || horizon_sectors > kMaxHorizonSectors)
+    return Error{"horizon_sectors must be in [0, 32] (0: off), got " +
+                 std::to_string(horizon_sectors)};
   return Status::Ok();
 }
 
@@ -274,11 +513,6 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   const Vec3d texel_step_x = scan_from_canvas.rotation * Vec3d(canvas.pitch_mm, 0, 0);
   const Vec3d texel_step_y = scan_from_canvas.rotation * Vec3d(0, -canvas.pitch_mm, 0);
 
-  // Per texel: surface point (canvas and scan frames) and tangent frame, shared by every photo.
-  struct TexelGeometry {
-    Vec3d p_canvas, p_scan;
-    TangentFrame frame;
-  };
   std::vector<TexelGeometry> geometry(n_texels);
   for (size_t t = 0; t < n_texels; ++t) {
     const int x = static_cast<int>(texels[t] % static_cast<uint32_t>(width));
@@ -318,6 +552,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     std::vector<uint8_t> stepped_over;  // an interpolated sample (PixelSample::stepped_over)
     std::vector<Vec3f> origins, view_dirs, light_dirs;
     std::vector<float> view_far, light_far;
+    std::vector<uint32_t> pixel_list;
     candidate.reserve(n_texels);
     for (size_t t = 0; t < n_texels; ++t) {
       const TexelGeometry& g = geometry[t];
@@ -345,7 +580,10 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       Eigen::Matrix2d jacobian;
       jacobian.col(0) = camera.Project(g.p_scan + texel_step_x) - px;
       jacobian.col(1) = camera.Project(g.p_scan + texel_step_y) - px;
-      const PixelSample pixel = Footprint(photo, px, jacobian, owner, texels[t]);
+      pixel_list.clear();
+      const PixelSample pixel = Average(
+          photo, Footprint(camera.width, camera.height, px, jacobian, owner, texels[t], pixel_list),
+          pixel_list);
       if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
         ++local.non_finite;
         continue;
@@ -423,10 +661,14 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     std::lock_guard lock(stats_mutex);
     stats += local;
   };
-  if (parallel)
-    tbb::parallel_for(size_t{0}, n_photos, per_photo);
-  else
-    for (size_t i = 0; i < n_photos; ++i) per_photo(i);
+  if (!options.share_view_rays) {
+    if (parallel)
+      tbb::parallel_for(size_t{0}, n_photos, per_photo);
+    else
+      for (size_t i = 0; i < n_photos; ++i) per_photo(i);
+  } else {
+    GatherPerView(scene, texels, options, geometry, slots, keep, stats, parallel);
+  }
   // parallel_for added each photo's `local` (whose texels field is 0) under the mutex.
 
   std::vector<BrdfSample> texel_samples;
