@@ -21,9 +21,9 @@ using nlohmann::json;
 // added to the plan's JSON below (and to docs/formats.md) or tiles would be fitted with its
 // default: these sizes make that a compile error, not a silent difference.
 static_assert(sizeof(TraceOptions) == 24, "carry the new TraceOptions field in the tile plan");
-static_assert(sizeof(SampleOptions) == 48, "carry the new SampleOptions field in the tile plan");
+static_assert(sizeof(SampleOptions) == 56, "carry the new SampleOptions field in the tile plan");
 static_assert(sizeof(BrdfFitOptions) == 128, "carry the new BrdfFitOptions field in the plan");
-static_assert(sizeof(ReflectanceFitOptions) == 224, "carry the new fit option in the tile plan");
+static_assert(sizeof(ReflectanceFitOptions) == 232, "carry the new fit option in the tile plan");
 static_assert(sizeof(PackWriteOptions) == 20, "carry the new pack option in the tile plan");
 
 fs::path TilePlan::TileFolder(size_t index) const {
@@ -66,6 +66,8 @@ json OptionsJson(const TilePlan& p) {
             {"visibility_rays", s.visibility_rays},
             {"shadow_rays", s.shadow_rays},
             {"min_direct_samples", s.min_direct_samples},
+            {"share_view_rays", s.share_view_rays},
+            {"horizon_sectors", s.horizon_sectors},
             {"skip_unblockable", s.trace.skip_unblockable},
             {"origin_offset_mm", s.trace.origin_offset_mm}}},
           {"brdf",
@@ -120,7 +122,8 @@ void ReadOptions(const Fields& o, TilePlan& p) {
 
   const Fields s = o.Object("samples");
   s.OnlyKeys({"min_cos", "black_level", "reject_black", "visibility_rays", "shadow_rays",
-              "min_direct_samples", "skip_unblockable", "origin_offset_mm"});
+              "min_direct_samples", "share_view_rays", "horizon_sectors", "skip_unblockable",
+              "origin_offset_mm"});
   SampleOptions& so = p.fit.samples;
   so.min_cos = s.Number("min_cos");
   so.black_level = static_cast<float>(s.Number("black_level"));
@@ -128,6 +131,8 @@ void ReadOptions(const Fields& o, TilePlan& p) {
   so.visibility_rays = s.Boolean("visibility_rays");
   so.shadow_rays = s.Boolean("shadow_rays");
   so.min_direct_samples = static_cast<int>(s.Integer("min_direct_samples", 0, 1 << 20));
+  so.share_view_rays = s.Boolean("share_view_rays");
+  so.horizon_sectors = static_cast<int>(s.Integer("horizon_sectors", 0, 32));
   so.trace.skip_unblockable = s.Boolean("skip_unblockable");
   so.trace.origin_offset_mm = s.Number("origin_offset_mm");
 
