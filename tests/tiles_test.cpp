@@ -261,8 +261,20 @@ TEST_F(TilesCli, PlanRunMergeGivesTheFitFolderOfDigitizeFit) {
     ASSERT_TRUE(std::regex_search(merged_report, b, number)) << key;
     EXPECT_EQ(a[1], b[1]) << key;
   }
-  EXPECT_NE(ReadFileBytes(dir_ / "painting.plan.tiles/run.log").find("tile 11 of 12 fitted"),
-            std::string::npos);
+  // Each job read a window of the canvas (its tile and a halo), not the canvas: 50-texel tiles
+  // with a halo of a few texels (2 mm texels, a few mm of relief, lights >= 15 degrees up).
+  const std::string log = ReadFileBytes(dir_ / "painting.plan.tiles/run.log");
+  EXPECT_NE(log.find("tile 11 of 12 fitted"), std::string::npos);
+  const std::regex window("window ([0-9]+) x ([0-9]+), halo ([0-9]+)");
+  int jobs = 0;
+  for (auto it = std::sregex_iterator(log.begin(), log.end(), window); it != std::sregex_iterator();
+       ++it, ++jobs) {
+    EXPECT_LE(std::stoi((*it)[1]), 50 + 2 * std::stoi((*it)[3])) << (*it)[0];
+    EXPECT_LT(std::stoi((*it)[1]), 200) << (*it)[0];
+    EXPECT_LT(std::stoi((*it)[2]), 149) << (*it)[0];
+    EXPECT_GT(std::stoi((*it)[3]), 0) << (*it)[0];
+  }
+  EXPECT_EQ(jobs, 12) << log;
 }
 
 // Killed (SIGKILL: no clean-up) while loading, after its first tile, half-way and while

@@ -111,7 +111,11 @@ struct HeightFieldTracer::Impl {
   std::string last_error;
   std::atomic<int64_t> embree_bytes{0};
 
-  int width = 0, height = 0;
+  int width = 0, height = 0;  // the grid's (a window's) texels
+  // The window's place in the full canvas (HeightField::window): texel and outline coordinates
+  // are the full canvas's.
+  int x0 = 0, y0 = 0, full_width = 0, full_height = 0;
+  float window_max_height_mm = 0;
   double pitch_mm = 0, inv_pitch_mm = 0;
   float max_height_mm = 0;
   float frame_raise_mm = 0;  // highest side's raise
@@ -171,6 +175,8 @@ struct HeightFieldTracer::Impl {
       level_height.push_back(lh);
     }
     max_height_mm = levels.empty() ? Height(0, 0) : levels.back()[0];
+    if (full_width > 0 && (full_width != width || full_height != height))
+      max_height_mm = std::max(max_height_mm, window_max_height_mm);
   }
 
   // Max height over the texels [x0, x1] x [y0, y1] (inclusive, inside the grid, non-empty), an
@@ -248,7 +254,8 @@ struct HeightFieldTracer::Impl {
     // Origin, direction and the footprint's start (at tnear) in continuous texel coordinates
     // (row flip: texel y grows as Y falls). The start lies just in front of the origin, so the
     // texels behind it stay out of the boxes.
-    const double tx = o.x() * inv_pitch_mm - 0.5, ty = height - o.y() * inv_pitch_mm - 0.5;
+    const double tx = o.x() * inv_pitch_mm - 0.5 - x0,
+                 ty = full_height - o.y() * inv_pitch_mm - 0.5 - y0;
     const double ddx = d.x() * inv_pitch_mm, ddy = -d.y() * inv_pitch_mm;
     const double sx = tx + offset * ddx, sy = ty + offset * ddy;
     int x0, x1, y0, y1;
@@ -281,7 +288,7 @@ struct HeightFieldTracer::Impl {
     const double t_above = (frame_raise_mm - lifted_z) / d.z();
     if (t_above <= 0.0) return t;  // starts above every box
     // Where the ray's horizontal path leaves [0, W] x [0, H] (0 for an origin outside it).
-    const double W = width * pitch_mm, H = height * pitch_mm;
+    const double W = full_width * pitch_mm, H = full_height * pitch_mm;
     const auto exit_along = [](double p, double dp, double hi) {
       if (p < 0.0 || p > hi) return 0.0;
       if (dp > 0.0) return (hi - p) / dp;
@@ -307,8 +314,8 @@ HeightFieldTracer::~HeightFieldTracer() = default;
 // canvas plane: rays from the canvas start above it.
 Status HeightFieldTracer::Impl::AttachFrameBoxes(const FrameBoxes& frame) {
   if (Status s = frame.Validate(); !s.ok()) return Error{"height-field tracer: " + s.message()};
-  const float W = static_cast<float>(width * pitch_mm);
-  const float H = static_cast<float>(height * pitch_mm);
+  const float W = static_cast<float>(full_width * pitch_mm);
+  const float H = static_cast<float>(full_height * pitch_mm);
   const float z0 = static_cast<float>(-pitch_mm);
   const auto& w = frame.width_mm;
   struct Box {
@@ -382,6 +389,11 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   auto impl = std::make_unique<Impl>();
   impl->width = w;
   impl->height = h;
+  impl->x0 = field.window.x0;
+  impl->y0 = field.window.y0;
+  impl->full_width = field.full_width();
+  impl->full_height = field.full_height();
+  impl->window_max_height_mm = field.window.full_max_height_mm;
   impl->pitch_mm = field.pitch_mm;
   impl->inv_pitch_mm = 1.0 / field.pitch_mm;
 
@@ -392,21 +404,25 @@ Result<HeightFieldTracer> HeightFieldTracer::Build(const HeightField& field) {
   std::atomic<bool> all_finite{true};
   float* v = impl->vertices.data();
   const double pitch = field.pitch_mm;
-  // Canvas-frame coordinate of vertex i of n + 2 along an axis: 0 and n on the outline.
-  auto coord = [pitch](int i, int n) {
-    if (i == 0) return 0.0;
-    if (i == n + 1) return n * pitch;
-    return (i - 0.5) * pitch;
+  // Canvas-frame coordinate of vertex i of n + 2 along an axis of a grid whose first texel is
+  // texel `first` of the full canvas: first and first + n on its outline. A window's outline
+  // sides inside the full canvas lie in its halo, which no ray of its tile reaches.
+  auto coord = [pitch](int i, int n, int first) {
+    if (i == 0) return first * pitch;
+    if (i == n + 1) return (first + n) * pitch;
+    return (first + i - 0.5) * pitch;
   };
+  const int x0 = field.window.x0, y0 = field.window.y0;
+  const double full_h_mm = field.full_height() * pitch;
   tbb::parallel_for(tbb::blocked_range<int>(0, vh, 32), [&](const tbb::blocked_range<int>& r) {
     bool finite = true;
     for (int row = r.begin(); row < r.end(); ++row) {
-      const float y_mm = static_cast<float>(h * pitch - coord(row, h));
+      const float y_mm = static_cast<float>(full_h_mm - coord(row, h, y0));
       const float* src = heights.Row(std::clamp(row - 1, 0, h - 1));
       float* dst = v + 3 * static_cast<size_t>(row) * vw;
       for (int c = 0; c < vw; ++c) {
         const float z = src[std::clamp(c - 1, 0, w - 1)];
-        dst[3 * c + 0] = static_cast<float>(coord(c, w));
+        dst[3 * c + 0] = static_cast<float>(coord(c, w, x0));
         dst[3 * c + 1] = y_mm;
         dst[3 * c + 2] = z;
         finite &= std::isfinite(z);
@@ -607,8 +623,8 @@ void HeightFieldTracer::Intersect(std::span<const Vec3f> origins, std::span<cons
         const double X = r.ray.org_x + t * r.ray.dir_x, Y = r.ray.org_y + t * r.ray.dir_y;
         out.hit = true;
         out.t = r.ray.tfar;
-        out.texel_x = static_cast<float>(X * inv_pitch - 0.5);
-        out.texel_y = static_cast<float>(impl.height - Y * inv_pitch - 0.5);
+        out.texel_x = static_cast<float>(X * inv_pitch - 0.5 - impl.x0);
+        out.texel_y = static_cast<float>(impl.full_height - Y * inv_pitch - 0.5 - impl.y0);
       }
     }
   };

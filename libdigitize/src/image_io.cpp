@@ -2,6 +2,7 @@
 #include "digitize/image_io.h"
 
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/imageio.h>
 #include <signal.h>
 #include <sys/statvfs.h>
@@ -514,6 +515,80 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
 }  // namespace digitize
 
 namespace digitize {
+
+struct ImageRegionReader::Impl {
+  OIIO::ImageCache* cache = nullptr;
+  std::atomic<size_t> peak{0};
+};
+
+ImageRegionReader::ImageRegionReader(size_t max_cache_mb) : impl_(std::make_unique<Impl>()) {
+  impl_->cache = OIIO::ImageCache::create(/*shared=*/false);
+  impl_->cache->attribute("max_memory_MB", static_cast<float>(std::max<size_t>(64, max_cache_mb)));
+  // Scanline files are cut into tiles of this size, so a rectangle costs its own rows.
+  impl_->cache->attribute("autotile", 256);
+  impl_->cache->attribute("autoscanline", 0);
+  impl_->cache->attribute("max_open_files", 64);
+}
+
+ImageRegionReader::~ImageRegionReader() { OIIO::ImageCache::destroy(impl_->cache, true); }
+
+size_t ImageRegionReader::cache_bytes() const {
+  long long used = 0;
+  impl_->cache->getattribute("stat:cache_memory_used", OIIO::TypeInt64, &used);
+  return static_cast<size_t>(std::max(0LL, used));
+}
+
+size_t ImageRegionReader::peak_cache_bytes() const {
+  return std::max(impl_->peak.load(), cache_bytes());
+}
+
+Result<FloatImage> ImageRegionReader::Read(const fs::path& path, int x, int y, int width,
+                                           int height) {
+  const std::string name = path.string();
+  const OIIO::ustring file(name);
+  OIIO::ImageSpec spec;
+  if (!impl_->cache->get_imagespec(file, spec)) {
+    std::string why = OneLine(impl_->cache->geterror());
+    if (!fs::exists(path)) why = "no such file";
+    return Error{name + ": cannot read (" + why + ")"};
+  }
+  if (width <= 0 || height <= 0 || x < 0 || y < 0 || x > spec.width - width ||
+      y > spec.height - height)
+    return Error{name + ": the region (" + std::to_string(x) + ", " + std::to_string(y) + ", " +
+                 std::to_string(width) + " x " + std::to_string(height) + ") is not inside the " +
+                 std::to_string(spec.width) + "x" + std::to_string(spec.height) + " image"};
+  if (spec.nchannels < 1 || spec.nchannels > 4 || spec.nchannels == 2)
+    return Error{name + ": " + std::to_string(spec.nchannels) + " channels (" +
+                 JoinNames(spec.channelnames) + "); only 1-, 3- or 4-channel images are read"};
+  FloatImage image;
+  image.width = width;
+  image.height = height;
+  image.channels = spec.nchannels;
+  // The cache converts as it caches: the file's own sample type is in its native spec.
+  OIIO::ImageSpec original;
+  impl_->cache->get_imagespec(file, original, 0, 0, /*native=*/true);
+  image.format = OIIO::Filesystem::extension(name, false);
+  image.integer_samples = IsIntegerType(original.format);
+  image.bits_per_sample = original.get_int_attribute("oiio:BitsPerSample",
+                                                     static_cast<int>(original.format.size() * 8));
+  image.channel_names = spec.channelnames;
+  const size_t count = static_cast<size_t>(width) * static_cast<size_t>(height) *
+                       static_cast<size_t>(spec.nchannels);
+  try {
+    image.pixels.resize(count);
+  } catch (const std::bad_alloc&) {
+    return Error{name + ": not enough memory for a " + std::to_string(width) + "x" +
+                 std::to_string(height) + " region"};
+  }
+  if (!impl_->cache->get_pixels(file, 0, 0, x, x + width, y, y + height, 0, 1, 0, spec.nchannels,
+                                OIIO::TypeDesc::FLOAT, image.pixels.data()))
+    return Error{name + ": truncated or corrupt pixel data (" + OneLine(impl_->cache->geterror()) +
+                 ")"};
+  size_t used = cache_bytes(), seen = impl_->peak.load();
+  while (used > seen && !impl_->peak.compare_exchange_weak(seen, used)) {
+  }
+  return image;
+}
 
 Status WriteJpegRgb8(const fs::path& path, const Grid<std::array<uint8_t, 3>>& image, int quality) {
   CheckStorage(image);

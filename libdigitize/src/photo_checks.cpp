@@ -194,6 +194,17 @@ Status CheckCameraSeesCanvas(const Camera& camera, const RigidTransform& canvas_
       if (camera.InFront(p) && camera.InImage(camera.Project(p))) return Status::Ok();
     }
   }
+  // A camera close to the canvas (a tiled photo set, a part of a photo) may see a patch between
+  // the lattice's points: it sees the canvas when its image centre's ray meets the rectangle.
+  Vec3d o, d;
+  camera.Ray(0.5 * (camera.width - 1), 0.5 * (camera.height - 1), o, d);
+  o = canvas_from_scan.Apply(o);
+  d = canvas_from_scan.rotation * d;
+  if (d.z() < 0 && o.z() > 0) {
+    const Vec3d hit = o + (o.z() / -d.z()) * d;
+    if (hit.x() >= 0 && hit.y() >= 0 && hit.x() <= extent_mm.x() && hit.y() <= extent_mm.y())
+      return Status::Ok();
+  }
   const Eigen::Vector2d c = camera.Project(centre_scan);
   return Error{what + ": the camera sees none of the canvas (its centre projects to pixel (" +
                FormatNumber(c.x(), kShownDigits) + ", " + FormatNumber(c.y(), kShownDigits) +
@@ -251,7 +262,7 @@ Status CheckCanvasFootprint(const Camera& camera, const RigidTransform& canvas_f
 
 Status CheckCamerasSeeCanvas(const PhotoSet& set, const RigidTransform& canvas_from_scan,
                              const HeightField& canvas) {
-  const Eigen::Vector2d extent(canvas.width() * canvas.pitch_mm, canvas.height() * canvas.pitch_mm);
+  const Eigen::Vector2d extent = canvas.extent_mm();
   for (const Photo& photo : set.photos) {
     if (Status s = CheckCameraSeesCanvas(photo.camera, canvas_from_scan, extent, photo.entry); !s) {
       return s;

@@ -243,35 +243,31 @@ std::string PhotoLoadSummary::Brief() const {
   return buf;
 }
 
-Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
-  if (Status s = options.Validate(); !s) return s;
-  auto image = ReadImage(photo.path, options.max_pixels_per_image);
-  if (!image) return Error{photo.entry + ": " + image.error().message};
-  if (image->width != photo.camera.width || image->height != photo.camera.height) {
-    return Error{photo.entry + ": " + photo.path.string() + ": image is " +
-                 Size(image->width, image->height) + ", its camera says " +
-                 Size(photo.camera.width, photo.camera.height)};
-  }
-  if (image->channels == 4) {
+namespace {
+
+// The decoded pixels of `photo` (the whole image or a rectangle of it) into photo.rgb / flags /
+// counts: RGBA and grey handled, colour linearised, NaN/Inf and saturation flagged.
+Status TakePixels(Photo& photo, FloatImage& image, const PhotoSetOptions& options) {
+  if (image.channels == 4) {
     // RGBA (a PNG saved with alpha): the colour is what was photographed; alpha is dropped.
-    float* p = image->pixels.data();
-    const size_t n = static_cast<size_t>(image->width) * static_cast<size_t>(image->height);
+    float* p = image.pixels.data();
+    const size_t n = static_cast<size_t>(image.width) * static_cast<size_t>(image.height);
     for (size_t i = 0; i < n; ++i)
       for (int c = 0; c < 3; ++c) p[i * 3 + c] = p[i * 4 + c];
-    image->pixels.resize(n * 3);
-    image->channels = 3;
+    image.pixels.resize(n * 3);
+    image.channels = 3;
   }
-  if (image->channels != 1 && image->channels != 3) {
-    return Error{photo.entry + ": " + photo.path.string() + ": " + std::to_string(image->channels) +
+  if (image.channels != 1 && image.channels != 3) {
+    return Error{photo.entry + ": " + photo.path.string() + ": " + std::to_string(image.channels) +
                  " channels; photos must be 1-channel (grey), 3-channel (RGB) or RGBA"};
   }
-  const ColourEncoding encoding = Resolve(photo.encoding, image->integer_samples);
+  const ColourEncoding encoding = Resolve(photo.encoding, image.integer_samples);
   Converted c;
   try {
-    c = Convert(*image, encoding, options);
+    c = Convert(image, encoding, options);
   } catch (const std::bad_alloc&) {
     return Error{photo.entry + ": " + photo.path.string() + ": not enough memory for " +
-                 Size(image->width, image->height) + " float RGB pixels"};
+                 Size(image.width, image.height) + " float RGB pixels"};
   }
   const size_t pixels = c.rgb.size();
   if (c.non_finite > options.max_non_finite_fraction * static_cast<double>(pixels)) {
@@ -286,6 +282,45 @@ Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
   photo.non_finite_pixels = c.non_finite;
   photo.saturated_pixels = c.saturated;
   return Status::Ok();
+}
+
+}  // namespace
+
+Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
+  if (Status s = options.Validate(); !s) return s;
+  auto image = ReadImage(photo.path, options.max_pixels_per_image);
+  if (!image) return Error{photo.entry + ": " + image.error().message};
+  if (image->width != photo.camera.width || image->height != photo.camera.height) {
+    return Error{photo.entry + ": " + photo.path.string() + ": image is " +
+                 Size(image->width, image->height) + ", its camera says " +
+                 Size(photo.camera.width, photo.camera.height)};
+  }
+  return TakePixels(photo, *image, options);
+}
+
+Result<Photo> LoadPhotoRegion(const Photo& photo, const PixelRect& region,
+                              ImageRegionReader& reader, const PhotoSetOptions& options) {
+  if (Status s = options.Validate(); !s) return Error{s.message()};
+  const Camera& c = photo.camera;
+  if (region.width <= 0 || region.height <= 0 || region.x < 0 || region.y < 0 ||
+      region.x > c.width - region.width || region.y > c.height - region.height)
+    return Error{photo.entry + ": region (" + std::to_string(region.x) + ", " +
+                 std::to_string(region.y) + ", " + Size(region.width, region.height) +
+                 ") is not inside the " + Size(c.width, c.height) + " image"};
+  auto image = reader.Read(photo.path, region.x, region.y, region.width, region.height);
+  if (!image) return Error{photo.entry + ": " + image.error().message};
+  Photo part;
+  part.path = photo.path;
+  part.entry = photo.entry;
+  part.light = photo.light;
+  part.encoding = photo.encoding;
+  part.camera = c;
+  part.camera.width = region.width;
+  part.camera.height = region.height;
+  part.camera.origin_x = c.origin_x + region.x;  // pixel (u, v) of the part is (u + x, v + y)
+  part.camera.origin_y = c.origin_y + region.y;
+  if (Status s = TakePixels(part, *image, options); !s.ok()) return Error{s.message()};
+  return part;
 }
 
 Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options,

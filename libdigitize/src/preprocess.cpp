@@ -441,42 +441,81 @@ Status CheckCanvasFolder(const std::filesystem::path& dir) {
   return Status::Ok();
 }
 
-Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir) {
+namespace {
+
+// The canvas folder `dir`, all of it (reader null) or the window [x0, x0 + ww) x [y0, y0 + wh) of
+// it read through `reader`; texels named in errors are the full canvas's.
+Result<PreprocessedCanvas> ReadCanvasFolder(const std::filesystem::path& dir,
+                                            ImageRegionReader* reader, int x0, int y0, int ww,
+                                            int wh) {
   if (Status s = CheckCanvasFolder(dir); !s.ok()) return Error{s.message()};
   PreprocessedCanvas out;
   const auto height_path = dir / "height.exr";
-  auto height = ReadImage(height_path);
+  const auto mask_path = dir / "mask.png";
+  const auto normals_path = dir / "normals.exr";
+  int w = 0, h = 0;  // the full canvas
+  auto read = [&](const std::filesystem::path& path) -> Result<FloatImage> {
+    if (!reader) return ReadImage(path);
+    return reader->Read(path, x0, y0, ww, wh);
+  };
+  if (reader) {
+    auto header = ReadImageHeader(height_path);
+    if (!header.ok()) return header.error();
+    w = header->width;
+    h = header->height;
+    if (ww <= 0 || wh <= 0 || x0 < 0 || y0 < 0 || x0 > w - ww || y0 > h - wh)
+      return Error{height_path.string() + ": the window (" + std::to_string(x0) + ", " +
+                   std::to_string(y0) + ", " + std::to_string(ww) + "x" + std::to_string(wh) +
+                   ") is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
+                   " canvas"};
+    for (const auto& path : {mask_path, normals_path}) {
+      auto other = ReadImageHeader(path);
+      if (!other.ok()) return other.error();
+      if (other->width != w || other->height != h)
+        return Error{path.string() + ": " + std::to_string(other->width) + "x" +
+                     std::to_string(other->height) + ", height.exr is " + std::to_string(w) + "x" +
+                     std::to_string(h)};
+    }
+  }
+  auto height = read(height_path);
   if (!height.ok()) return height.error();
   if (height->channels != 1)
     return Error{height_path.string() + ": " + std::to_string(height->channels) +
                  " channels, expected 1 (height in mm)"};
-  const int w = height->width, h = height->height;
+  if (!reader) {
+    w = height->width;
+    h = height->height;
+    x0 = y0 = 0;
+  }
+  const int gw = height->width, gh = height->height;  // the grid read
   auto size_error = [&](const std::filesystem::path& p, int pw, int ph) {
     return Error{p.string() + ": " + std::to_string(pw) + "x" + std::to_string(ph) +
                  ", height.exr is " + std::to_string(w) + "x" + std::to_string(h)};
   };
-  const auto mask_path = dir / "mask.png";
-  auto mask = ReadImage(mask_path);
+  auto mask = read(mask_path);
   if (!mask.ok()) return mask.error();
-  if (mask->width != w || mask->height != h)
+  if (mask->width != gw || mask->height != gh)
     return size_error(mask_path, mask->width, mask->height);
   if (mask->channels != 1) return Error{mask_path.string() + ": expected a 1-channel mask"};
-  const auto normals_path = dir / "normals.exr";
-  auto normals = ReadImage(normals_path);
+  auto normals = read(normals_path);
   if (!normals.ok()) return normals.error();
-  if (normals->width != w || normals->height != h)
+  if (normals->width != gw || normals->height != gh)
     return size_error(normals_path, normals->width, normals->height);
   if (normals->channels != 3)
     return Error{normals_path.string() + ": expected 3 channels (nx, ny, nz)"};
 
-  out.field.height_mm = Grid<float>(w, h);
-  out.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
-  out.normals = Grid<Vec3f>(w, h);
+  out.field.height_mm = Grid<float>(gw, gh);
+  out.field.state = Grid<TexelState>(gw, gh, TexelState::kOutside);
+  out.normals = Grid<Vec3f>(gw, gh);
+  if (reader) out.field.window = TexelWindow{x0, y0, w, h};
+  auto texel = [&](size_t i) {
+    return std::to_string(x0 + static_cast<int>(i % gw)) + ", " +
+           std::to_string(y0 + static_cast<int>(i / gw));
+  };
   for (size_t i = 0; i < out.field.height_mm.size(); ++i) {
     const float z = height->pixels[i];
     if (!std::isfinite(z))
-      return Error{height_path.string() + ": non-finite height at texel " + std::to_string(i % w) +
-                   ", " + std::to_string(i / w)};
+      return Error{height_path.string() + ": non-finite height at texel " + texel(i)};
     out.field.height_mm.data[i] = z;
     const int code = static_cast<int>(std::lround(mask->pixels[i] * 255.0f));
     switch (code) {
@@ -494,13 +533,12 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
         break;
       default:
         return Error{mask_path.string() + ": value " + std::to_string(code) + " at texel " +
-                     std::to_string(i % w) + ", " + std::to_string(i / w) +
-                     " is not a texel state (0, 85, 170, 255)"};
+                     texel(i) + " is not a texel state (0, 85, 170, 255)"};
     }
     const Vec3f n(normals->pixels[3 * i], normals->pixels[3 * i + 1], normals->pixels[3 * i + 2]);
     if (!IsValid(n) || std::abs(n.norm() - 1.0f) > 1e-3f)
-      return Error{normals_path.string() + ": normal at texel " + std::to_string(i % w) + ", " +
-                   std::to_string(i / w) + " is not a unit vector"};
+      return Error{normals_path.string() + ": normal at texel " + texel(i) +
+                   " is not a unit vector"};
     out.normals.data[i] = n;
   }
 
@@ -511,6 +549,17 @@ Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& di
   });
   if (!json_read.ok()) return json_read.error();
   return out;
+}
+
+}  // namespace
+
+Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir) {
+  return ReadCanvasFolder(dir, nullptr, 0, 0, 0, 0);
+}
+
+Result<PreprocessedCanvas> ReadPreprocessWindow(const std::filesystem::path& dir, int x0, int y0,
+                                                int width, int height, ImageRegionReader& reader) {
+  return ReadCanvasFolder(dir, &reader, x0, y0, width, height);
 }
 
 }  // namespace digitize

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 
 #include "digitize/image_io.h"
@@ -91,8 +92,8 @@ size_t PrefilterDarkOutliers(BrdfSamples& samples, const ReflectanceFitOptions& 
 void CountPhotoDirections(const PhotoSet& set, const HeightField& canvas,
                           const RigidTransform& canvas_from_scan, ReflectanceFitReport& report) {
   const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
-  const Vec3d centre = scan_from_canvas.Apply(
-      Vec3d(canvas.width() * canvas.pitch_mm / 2, canvas.height() * canvas.pitch_mm / 2, 0));
+  const Vec3d centre =
+      scan_from_canvas.Apply(Vec3d(canvas.extent_mm().x() / 2, canvas.extent_mm().y() / 2, 0));
   const double same = std::cos(kSameDirectionDeg * M_PI / 180.0);
   std::vector<std::pair<Vec3d, Vec3d>> distinct;  // (light, view), canvas frame
   report.photos = set.photos.size();
@@ -329,13 +330,19 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
                              const RigidTransform& canvas_from_scan, const PhotoSet& photos,
                              const ReflectanceFitOptions& options,
                              std::span<const TexelRect> regions, const RegionFitted& done,
-                             const ProgressCallback& progress) {
+                             const ProgressCallback& progress,
+                             const SharedFitInputs& shared_inputs) {
   auto start = Clock::now();
   if (Status s = options.Validate(); !s.ok()) return Error{"fit options: " + s.message()};
   ReportProgress(progress, "fit", 0.0);
   auto t0 = Clock::now();
-  auto tracer = HeightFieldTracer::Build(canvas);
-  if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
+  std::optional<HeightFieldTracer> built;
+  if (!shared_inputs.tracer) {
+    auto tracer = HeightFieldTracer::Build(canvas);
+    if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
+    built = std::move(tracer).value();
+  }
+  const HeightFieldTracer& tracer = shared_inputs.tracer ? *shared_inputs.tracer : *built;
   size_t all_texels = 0;
   for (size_t r = 0; r < regions.size(); ++r) {
     const TexelRect& g = regions[r];
@@ -351,21 +358,27 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
   ReflectanceFitReport shared;
   shared.seconds_tracer = Since(t0);
 
-  SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &*tracer};
+  SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &tracer};
+  const PhotoSet& whole_set = shared_inputs.whole_set ? *shared_inputs.whole_set : photos;
+  if (shared_inputs.whole_set) {
+    if (Status s = CheckCamerasSeeCanvas(whole_set, canvas_from_scan, canvas); !s.ok())
+      return Error{s.message()};
+    scene.cameras_checked = true;
+  }
   if (Status s = ValidateSampleScene(scene); !s.ok()) return Error{s.message()};
   PixelTexelMaps pixel_maps;
   if (options.pixel_texel_maps) {
     t0 = Clock::now();
-    pixel_maps = MapPixelsToTexels(photos, canvas, canvas_from_scan, *tracer);
+    pixel_maps = MapPixelsToTexels(photos, canvas, canvas_from_scan, tracer);
     scene.pixel_texels = &pixel_maps;
     shared.seconds_samples += Since(t0);
   }
-  CountPhotoDirections(photos, canvas, canvas_from_scan, shared);
+  CountPhotoDirections(whole_set, canvas, canvas_from_scan, shared);
   const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
   if (shared.distinct_directions < needed) {
     const int n = shared.distinct_directions;
     const size_t below = shared.light_below_canvas.size();
-    return Error{photos.source.string() + ": only " + std::to_string(n) +
+    return Error{whole_set.source.string() + ": only " + std::to_string(n) +
                  " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
                  " with the light above the canvas, in " + std::to_string(shared.photos) +
                  (shared.photos == 1 ? " photo" : " photos") +

@@ -230,10 +230,139 @@ std::string TileRunReport::Brief() const {
   return s + Format("; %.1f s", seconds);
 }
 
+namespace {
+
+// The inputs of one tile job: the tile, a halo around it wide enough to hold everything that can
+// shadow or hide the tile's texels, and of each photo the pixels the tile's texels project to.
+struct TileInputs {
+  PreprocessedCanvas canvas;  // the window: tile + halo (field.window)
+  PhotoSet photos;            // parts of the photos that see the tile
+  TexelRect region;           // the tile, in the window's texels
+  int halo = 0;               // texels
+};
+
+constexpr int kHaloSlackTexels = 2;  // bilinear quads and the tracer's whole-texel footprints
+// Rays flatter than this (light or camera within 1 degree of the canvas plane) may cross the whole
+// canvas under the relief's top: such a tile reads the whole canvas.
+const double kMinSinElevation = std::sin(1.0 * M_PI / 180.0);
+
+// Canvas-frame corners of the box over a tile's texels (one texel wider each side, so pixel
+// footprints and bilinear neighbours are in) from z0 to z1.
+std::array<Vec3d, 8> TileBox(const TilePlan& plan, const TexelRect& t, double pitch, double z0,
+                             double z1) {
+  const double X0 = (t.x - 1.0) * pitch, X1 = (t.x + t.width + 1.0) * pitch;
+  const double Y0 = (plan.canvas_height - t.y - t.height - 1.0) * pitch;
+  const double Y1 = (plan.canvas_height - t.y + 1.0) * pitch;
+  std::array<Vec3d, 8> c;
+  for (int i = 0; i < 8; ++i) c[i] = Vec3d(i & 1 ? X1 : X0, i & 2 ? Y1 : Y0, i & 4 ? z1 : z0);
+  return c;
+}
+
+// The smallest sine of the elevation (above the canvas plane) of any light or camera of `set`
+// seen from the tile's corners at height z: a ray leaving a tile texel towards it climbs at least
+// this steeply. Over a rectangle the farthest point from a light's foot is a corner, so the
+// corners bound every texel.
+double MinSinElevation(const PhotoSet& set, const RigidTransform& canvas_from_scan,
+                       const std::array<Vec3d, 8>& box) {
+  const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
+  double least = 1.0;
+  for (const Photo& photo : set.photos) {
+    for (int i = 0; i < 4; ++i) {  // the bottom corners
+      const Vec3d p_scan = scan_from_canvas.Apply(box[i]);
+      const Vec3d to_light = canvas_from_scan.rotation * photo.light.DirectionTo(p_scan);
+      Vec3d o, d;
+      photo.camera.Ray(photo.camera.cx - photo.camera.origin_x,
+                       photo.camera.cy - photo.camera.origin_y, o, d);
+      const Vec3d to_camera = photo.camera.model == CameraModel::kOrthographic
+                                  ? Vec3d(canvas_from_scan.rotation * -d)
+                                  : Vec3d(canvas_from_scan.rotation * (o - p_scan).normalized());
+      least = std::min({least, to_light.z(), to_camera.z()});
+    }
+  }
+  return least;
+}
+
+// The pixel rectangle of `camera` that holds the projection of `box` and the footprints of its
+// texels; empty (width 0) when the box projects off the image. A box partly behind the camera
+// takes the whole image.
+PixelRect BoxPixels(const Camera& camera, const RigidTransform& canvas_from_scan,
+                    const std::array<Vec3d, 8>& box, double pitch) {
+  const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
+  double u0 = std::numeric_limits<double>::infinity(), v0 = u0, u1 = -u0, v1 = -u0;
+  double texel_px = 1.0;  // the largest texel footprint, pixels
+  for (const Vec3d& corner : box) {
+    const Vec3d p = scan_from_canvas.Apply(corner);
+    const Vec3d q = scan_from_canvas.Apply(corner + Vec3d(pitch, 0, 0));
+    if (!camera.InFront(p) || !camera.InFront(q)) return {0, 0, camera.width, camera.height};
+    const Eigen::Vector2d a = camera.Project(p), b = camera.Project(q);
+    u0 = std::min(u0, a.x()), u1 = std::max(u1, a.x());
+    v0 = std::min(v0, a.y()), v1 = std::max(v1, a.y());
+    texel_px = std::max(texel_px, (b - a).norm());
+  }
+  const double margin = std::ceil(2.0 * texel_px) + 3.0;
+  const double x0 = std::max(0.0, std::floor(u0 - margin));
+  const double y0 = std::max(0.0, std::floor(v0 - margin));
+  const double x1 = std::min<double>(camera.width, std::ceil(u1 + margin) + 1.0);
+  const double y1 = std::min<double>(camera.height, std::ceil(v1 + margin) + 1.0);
+  if (!(x1 > x0 && y1 > y0)) return {};
+  return {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1 - x0),
+          static_cast<int>(y1 - y0)};
+}
+
+Result<TileInputs> ReadTileInputs(const TilePlan& plan, size_t index, const PhotoSet& whole,
+                                  const RigidTransform& canvas_from_scan, double pitch,
+                                  ImageRegionReader& reader) {
+  const TexelRect& tile = plan.tiles[index];
+  TileInputs in;
+  // Halo: a ray from a tile texel (at >= the canvas's lowest height) climbing at least at the
+  // set's flattest elevation is above the highest relief within `reach` mm.
+  const double sin_e = MinSinElevation(
+      whole, canvas_from_scan, TileBox(plan, tile, pitch, plan.min_height_mm, plan.max_height_mm));
+  const int whole_canvas = std::max(plan.canvas_width, plan.canvas_height);
+  if (sin_e < kMinSinElevation) {
+    in.halo = whole_canvas;
+  } else {
+    const double tan_e = sin_e / std::sqrt(1.0 - sin_e * sin_e);
+    const double reach_mm = (plan.max_height_mm - plan.min_height_mm) / tan_e;
+    in.halo = static_cast<int>(
+        std::min<double>(whole_canvas, std::ceil(reach_mm / pitch) + kHaloSlackTexels));
+  }
+  const int x0 = std::max(0, tile.x - in.halo), y0 = std::max(0, tile.y - in.halo);
+  const int x1 = std::min(plan.canvas_width, tile.x + tile.width + in.halo);
+  const int y1 = std::min(plan.canvas_height, tile.y + tile.height + in.halo);
+  auto canvas = ReadPreprocessWindow(plan.canvas, x0, y0, x1 - x0, y1 - y0, reader);
+  if (!canvas.ok()) return canvas.error();
+  in.canvas = std::move(canvas).value();
+  in.canvas.field.window.full_max_height_mm = static_cast<float>(plan.max_height_mm);
+  in.region = {tile.x - x0, tile.y - y0, tile.width, tile.height};
+
+  in.photos.source = whole.source;
+  const auto box =
+      TileBox(plan, tile, pitch, plan.min_height_mm - pitch, plan.max_height_mm + pitch);
+  for (const Photo& photo : whole.photos) {
+    const PixelRect rect = BoxPixels(photo.camera, canvas_from_scan, box, pitch);
+    if (rect.width == 0) continue;  // sees none of the tile
+    auto part = LoadPhotoRegion(photo, rect, reader, plan.photo);
+    if (!part.ok()) return part.error();
+    in.photos.photos.push_back(std::move(part).value());
+  }
+  if (in.photos.photos.empty()) {
+    // No photo sees the tile: its texels get no sample (kTooFewSamples), as in the whole fit. The
+    // fit still needs a photo set; one pixel of the first photo, far from the tile, adds nothing.
+    auto part = LoadPhotoRegion(whole.photos.front(), {0, 0, 1, 1}, reader, plan.photo);
+    if (!part.ok()) return part.error();
+    in.photos.photos.push_back(std::move(part).value());
+  }
+  return in;
+}
+
+}  // namespace
+
 Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
                                const ProgressCallback& progress) {
   const auto start = Clock::now();
   if (options.threads < 0) return Error{"threads must be >= 0"};
+  if (options.cache_mb < 64) return Error{"cache_mb must be >= 64"};
   for (size_t index : options.indices)
     if (index >= plan.tiles.size())
       return Error{plan.file.string() + ": no tile " + std::to_string(index) + " (the plan has " +
@@ -254,46 +383,67 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
   }
   if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
 
-  // Read as `digitize fit` reads them, so each tile sees what the whole canvas's fit would.
+  // The photos' headers only: each tile reads the parts it needs.
   ReportProgress(progress, "photos", 0.0);
-  auto photos = ReadPhotoSetFile(plan.photos, plan.photo, progress);
+  PhotoSetOptions headers_only = plan.photo;
+  headers_only.load_pixels = false;
+  auto photos = ReadPhotoSetFile(plan.photos, headers_only, progress);
   if (!photos.ok()) return photos.error();
   if (photos->is_rti)
     return Error{plan.photos.string() + ": an RTI capture: fit it untiled (`digitize fit`)"};
-  auto canvas = ReadPreprocessOutputs(plan.canvas);
-  if (!canvas.ok()) return canvas.error();
-  if (canvas->field.width() != plan.canvas_width || canvas->field.height() != plan.canvas_height)
-    return Error{plan.canvas.string() + ": the canvas is " + std::to_string(canvas->field.width()) +
-                 " x " + std::to_string(canvas->field.height()) + " texels, the plan " +
-                 plan.file.string() + " was cut for " + std::to_string(plan.canvas_width) + " x " +
+  auto header = ReadImageHeader(plan.canvas / "height.exr");
+  if (!header.ok()) return header.error();
+  if (header->width != plan.canvas_width || header->height != plan.canvas_height)
+    return Error{plan.canvas.string() + ": the canvas is " + std::to_string(header->width) + " x " +
+                 std::to_string(header->height) + " texels, the plan " + plan.file.string() +
+                 " was cut for " + std::to_string(plan.canvas_width) + " x " +
                  std::to_string(plan.canvas_height) + ": make a new plan"};
+  ImageRegionReader reader(options.cache_mb);
+  // One texel of the canvas: its frame and pitch, which every tile's window shares.
+  auto frame = ReadPreprocessWindow(plan.canvas, 0, 0, 1, 1, reader);
+  if (!frame.ok()) return frame.error();
   ReflectanceFitOptions fit = plan.fit;
   fit.fit.num_threads = options.threads;
   fit.samples.trace.num_threads = options.threads;
-  std::vector<TexelRect> regions;
-  for (size_t index : todo) regions.push_back(plan.tiles[index]);
   const FolderOutput output{"tiles run", "fit-tile", {plan.canvas, plan.photos}};
   const std::vector<std::string> inputs = PlanInputs(plan);
-  const Status fitted = FitReflectanceRegions(
-      canvas->field, canvas->normals, canvas->canvas_from_scan, *photos, fit, regions,
-      [&](size_t r, ReflectanceFitResult&& result) -> Status {
-        const size_t index = todo[r];
-        const Status written =
-            WriteDirectoryAtomically(plan.TileFolder(index), output, [&](const fs::path& dir) {
-              if (Status s = WriteReflectanceOutputs(dir, result, plan.fit, inputs); !s.ok())
-                return s;
-              return WriteTextFile(dir / kTileResultFile,
-                                   TileResultJson(plan, index).dump(2) + "\n");
-            });
-        if (!written.ok()) return Error{"tile " + std::to_string(index) + ": " + written.message()};
-        report.fitted.push_back(index);
-        AppendLog(plan, Format("tile %zu of %zu fitted in %.1f s: ", index, plan.tiles.size(),
-                               result.report.seconds_total) +
-                            result.report.Brief());
-        return Status::Ok();
-      },
-      progress);
-  if (!fitted.ok()) return Error{plan.file.string() + ": " + fitted.message()};
+  for (size_t k = 0; k < todo.size(); ++k) {
+    const size_t index = todo[k];
+    const auto tile_start = Clock::now();
+    auto in = ReadTileInputs(plan, index, *photos, frame->canvas_from_scan, frame->field.pitch_mm,
+                             reader);
+    if (!in.ok()) return Error{"tile " + std::to_string(index) + ": " + in.error().message};
+    const SharedFitInputs shared{nullptr, &*photos};
+    const Status fitted = FitReflectanceRegions(
+        in->canvas.field, in->canvas.normals, in->canvas.canvas_from_scan, in->photos, fit,
+        std::span<const TexelRect>(&in->region, 1),
+        [&](size_t, ReflectanceFitResult&& result) -> Status {
+          const Status written =
+              WriteDirectoryAtomically(plan.TileFolder(index), output, [&](const fs::path& dir) {
+                if (Status s = WriteReflectanceOutputs(dir, result, plan.fit, inputs); !s.ok())
+                  return s;
+                return WriteTextFile(dir / kTileResultFile,
+                                     TileResultJson(plan, index).dump(2) + "\n");
+              });
+          if (!written.ok())
+            return Error{"tile " + std::to_string(index) + ": " + written.message()};
+          report.fitted.push_back(index);
+          AppendLog(plan,
+                    Format("tile %zu of %zu fitted in %.1f s (window %d x %d, halo %d, %zu of %zu "
+                           "photos): ",
+                           index, plan.tiles.size(), Since(tile_start), in->canvas.field.width(),
+                           in->canvas.field.height(), in->halo, in->photos.photos.size(),
+                           photos->photos.size()) +
+                        result.report.Brief());
+          return Status::Ok();
+        },
+        nullptr, shared);
+    if (!fitted.ok())
+      return Error{plan.file.string() + ": tile " + std::to_string(index) + ": " +
+                   fitted.message()};
+    report.peak_cache_bytes = reader.peak_cache_bytes();
+    ReportProgress(progress, "tiles", static_cast<double>(k + 1) / todo.size());
+  }
   report.seconds = Since(start);
   return report;
 }

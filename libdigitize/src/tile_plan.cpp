@@ -205,6 +205,7 @@ json PlanContent(const TilePlan& p) {
           {"work", p.work.string()},
           {"canvas_size", {p.canvas_width, p.canvas_height}},
           {"tile_size", p.tile_size},
+          {"height_range_mm", {p.min_height_mm, p.max_height_mm}},
           {"options", OptionsJson(p)},
           {"tiles", tiles}};
 }
@@ -245,7 +246,7 @@ Result<TilePlan> ReadTilePlan(const fs::path& file) {
       Fail(where + ": tile plan version " + std::to_string(version) + "; this build reads " +
            std::to_string(kTilePlanVersion));
     f.OnlyKeys({"format", "version", "canvas", "photos", "out", "work", "canvas_size", "tile_size",
-                "options", "tiles", "id"});
+                "height_range_mm", "options", "tiles", "id"});
     TilePlan p;
     p.file = ResolvePath(file);
     p.canvas = AbsolutePath(f, "canvas");
@@ -257,6 +258,15 @@ Result<TilePlan> ReadTilePlan(const fs::path& file) {
       Fail(f.At("canvas_size") + " must be [width, height], got " + Show(size));
     p.canvas_width = size[0].get<int>();
     p.canvas_height = size[1].get<int>();
+    const json& range = f.Array("height_range_mm");
+    if (range.size() != 2 || !range[0].is_number() || !range[1].is_number())
+      Fail(f.At("height_range_mm") + " must be [lowest, highest], got " + Show(range));
+    p.min_height_mm = range[0].get<double>();
+    p.max_height_mm = range[1].get<double>();
+    if (!(p.min_height_mm <= p.max_height_mm && p.min_height_mm >= -kMaxPackHeightMm &&
+          p.max_height_mm <= kMaxPackHeightMm))
+      Fail(f.At("height_range_mm") + " must be [lowest, highest] within +-" +
+           FormatNumber(kMaxPackHeightMm) + " mm, got " + Show(range));
     constexpr int kMaxSide = 1 << 20;
     if (p.canvas_width < 1 || p.canvas_height < 1 || p.canvas_width > kMaxSide ||
         p.canvas_height > kMaxSide)
@@ -335,6 +345,26 @@ Result<TilePlan> MakeTilePlan(const TilePlanOptions& options) {
   if (!header.ok()) return header.error();
   p.canvas_width = header->width;
   p.canvas_height = header->height;
+  // The height range in strips of rows through a bounded cache: the plan of a canvas larger than
+  // memory is made in bounded memory too.
+  {
+    ImageRegionReader reader(256);
+    constexpr int kStripRows = 256;
+    p.min_height_mm = std::numeric_limits<double>::infinity();
+    p.max_height_mm = -std::numeric_limits<double>::infinity();
+    for (int y = 0; y < p.canvas_height; y += kStripRows) {
+      const int rows = std::min(kStripRows, p.canvas_height - y);
+      auto strip = reader.Read(p.canvas / "height.exr", 0, y, p.canvas_width, rows);
+      if (!strip.ok()) return strip.error();
+      for (float z : strip->pixels) {
+        if (!std::isfinite(z))
+          return Error{(p.canvas / "height.exr").string() + ": a non-finite height (row " +
+                       std::to_string(y) + " or below)"};
+        p.min_height_mm = std::min(p.min_height_mm, static_cast<double>(z));
+        p.max_height_mm = std::max(p.max_height_mm, static_cast<double>(z));
+      }
+    }
+  }
   PhotoSetOptions headers_only = p.photo;
   headers_only.load_pixels = false;
   auto set = ReadPhotoSetFile(p.photos, headers_only);

@@ -64,21 +64,38 @@ struct FrameBoxes {
   }
 };
 
+// The part of a larger canvas a grid holds: texels [x0, x0 + width) x [y0, y0 + height) of a
+// full_width x full_height canvas (a tile and its halo, tile_jobs.h). Texel centres, the canvas
+// outline and the frame stay the full canvas's, computed from whole texel indices, so a ray of
+// the part is the same ray, bit for bit, as the full canvas's. full_width = 0: the whole canvas.
+struct TexelWindow {
+  int x0 = 0, y0 = 0;
+  int full_width = 0, full_height = 0;
+  // The full canvas's highest height: where rays start above the relief (camera rays) and the
+  // first bound of the tracer's skipping are the full canvas's, not the window's.
+  float full_max_height_mm = 0;
+};
+
 struct HeightField {
   Grid<float> height_mm;   // never NaN/Inf; 0 where kOutside
   Grid<TexelState> state;  // same size as height_mm
   double pitch_mm = 0.0;   // texel spacing along X and Y
   FrameBoxes frame;        // none by default
+  TexelWindow window;      // the whole canvas by default
 
   int width() const { return height_mm.width; }
   int height() const { return height_mm.height; }
-  // Canvas-frame XY of a texel centre (see the header comment for the row flip).
+  int full_width() const { return window.full_width > 0 ? window.full_width : width(); }
+  int full_height() const { return window.full_width > 0 ? window.full_height : height(); }
+  Eigen::Vector2d extent_mm() const { return {full_width() * pitch_mm, full_height() * pitch_mm}; }
+  // Canvas-frame XY of a texel centre (see the header comment for the row flip). x + x0 is a
+  // whole number: exact, so a window's centres are the full canvas's.
   Eigen::Vector2d TexelCentreMm(double x, double y) const {
-    return {(x + 0.5) * pitch_mm, (height_mm.height - y - 0.5) * pitch_mm};
+    return {(x + window.x0 + 0.5) * pitch_mm, (full_height() - (y + window.y0) - 0.5) * pitch_mm};
   }
-  // Inverse of TexelCentreMm (continuous texel coordinates).
+  // Inverse of TexelCentreMm (continuous texel coordinates of this grid).
   Eigen::Vector2d TexelFromMm(double X, double Y) const {
-    return {X / pitch_mm - 0.5, height_mm.height - Y / pitch_mm - 0.5};
+    return {X / pitch_mm - 0.5 - window.x0, full_height() - Y / pitch_mm - 0.5 - window.y0};
   }
 };
 

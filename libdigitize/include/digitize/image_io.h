@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -99,6 +100,31 @@ struct ImageHeader {
   std::string resolution_tag;
 };
 Result<ImageHeader> ReadImageHeader(const std::filesystem::path& path);
+
+// Rectangles of image files, read through one OpenImageIO ImageCache whose memory is bounded
+// (`max_cache_mb`): tiled TIFF/OpenEXR files are read tile by tile, scanline files (PNG, JPEG)
+// in 256 x 256 pieces the cache decodes once and keeps while they fit; so the fit of a part of a
+// painting holds the part of each photo it needs, not the photos. Thread-safe.
+class ImageRegionReader {
+ public:
+  explicit ImageRegionReader(size_t max_cache_mb = 1024);
+  ~ImageRegionReader();
+  ImageRegionReader(const ImageRegionReader&) = delete;
+  ImageRegionReader& operator=(const ImageRegionReader&) = delete;
+
+  // Pixels [x, x + width) x [y, y + height) of the file's first image as float (integer samples
+  // mapped onto [0, 1] as ReadImage does), every channel, and the file's header fields (format,
+  // bits, integer_samples, channel names); FloatImage::width/height are the rectangle's. Errors
+  // name the file: unreadable, truncated, or a rectangle that is not inside the image.
+  Result<FloatImage> Read(const std::filesystem::path& path, int x, int y, int width, int height);
+  // Bytes the cache holds now, and the most it held.
+  size_t cache_bytes() const;
+  size_t peak_cache_bytes() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 Result<FloatImage> ReadImage(const std::filesystem::path& path,
                              size_t max_pixels = size_t{1} << 28);

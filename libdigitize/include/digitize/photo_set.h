@@ -41,6 +41,8 @@
 
 namespace digitize {
 
+class ImageRegionReader;  // image_io.h
+
 // ---------------------------------------------------------------------------------------------
 // Camera.
 
@@ -69,6 +71,11 @@ struct Camera {
   double cx = 0, cy = 0;            // principal point, px (pixel centres at integers)
   double pixel_pitch_mm = 0;        // orthographic only: mm per pixel on the object
   RigidTransform camera_from_scan;  // p_camera = R p_scan + t, mm; rotation det +1
+  // This image is the part of a larger one (LoadPhotoRegion) whose pixel (origin_x, origin_y) is
+  // its pixel (0, 0): projections are the whole image's less the origin, subtracted last, so a
+  // part's pixel coordinates are the whole's exactly (an integer off a double of larger
+  // magnitude), and its rays are the whole's rays, bit for bit. 0 for a whole image.
+  int origin_x = 0, origin_y = 0;
 
   // True when the point is in front of the camera (camera-frame z > 0). Orthographic cameras see
   // along their whole axis, but a point behind their nominal origin is still reported "behind",
@@ -79,9 +86,9 @@ struct Camera {
   Eigen::Vector2d Project(const Vec3d& p_scan) const {
     const Vec3d p = camera_from_scan.Apply(p_scan);
     if (model == CameraModel::kOrthographic) {
-      return {p.x() / pixel_pitch_mm + cx, p.y() / pixel_pitch_mm + cy};
+      return {p.x() / pixel_pitch_mm + cx - origin_x, p.y() / pixel_pitch_mm + cy - origin_y};
     }
-    return {fx * p.x() / p.z() + cx, fy * p.y() / p.z() + cy};
+    return {fx * p.x() / p.z() + cx - origin_x, fy * p.y() / p.z() + cy - origin_y};
   }
 
   // Whether pixel coordinates fall on the image (pixel centres at 0 .. width-1, edges at -0.5).
@@ -98,6 +105,8 @@ struct Camera {
   // The ray through the centre of pixel (u, v), scan frame: origin and unit direction (into the
   // scene). Orthographic: from the pixel's place on the camera's plane, along its axis.
   void Ray(double u, double v, Vec3d& origin, Vec3d& direction) const {
+    u += origin_x;  // exact: pixel centres are integers
+    v += origin_y;
     const Mat3d scan_from_camera = camera_from_scan.rotation.transpose();
     if (model == CameraModel::kOrthographic) {
       const Vec3d p((u - cx) * pixel_pitch_mm, (v - cy) * pixel_pitch_mm, 0.0);
@@ -112,6 +121,7 @@ struct Camera {
   bool SameView(const Camera& o) const {
     return model == o.model && width == o.width && height == o.height && fx == o.fx && fy == o.fy &&
            cx == o.cx && cy == o.cy && pixel_pitch_mm == o.pixel_pitch_mm &&
+           origin_x == o.origin_x && origin_y == o.origin_y &&
            camera_from_scan.rotation == o.camera_from_scan.rotation &&
            camera_from_scan.translation == o.camera_from_scan.translation;
   }
@@ -326,6 +336,19 @@ Status LoadPhotoPixels(PhotoSet& set, const PhotoSetOptions& options = {},
 // One photo. Errors name the entry and the image file.
 Status LoadPhoto(Photo& photo, const PhotoSetOptions& options = {});
 
+// A rectangle of a photo's pixels: columns [x, x + width), rows [y, y + height).
+struct PixelRect {
+  int x = 0, y = 0, width = 0, height = 0;
+};
+// The part `region` of a photo (header read, pixels not needed) as a photo of its own: the same
+// light and pose, the camera's image cut to the rectangle (Camera::origin_x/y += (x, y), so a
+// pixel's ray is the whole photo's ray through the same pixel, bit for bit), its pixels read
+// through `reader` (a bounded cache: photos far larger than memory are read a part at a time)
+// and converted as LoadPhoto converts them. Errors name the entry and the file; a region not
+// inside the image.
+Result<Photo> LoadPhotoRegion(const Photo& photo, const PixelRect& region,
+                              ImageRegionReader& reader, const PhotoSetOptions& options = {});
+
 // sRGB EOTF (IEC 61966-2-1), exact piecewise form: c <= 0.04045 ? c / 12.92
 // : ((c + 0.055) / 1.055)^2.4; odd-symmetric for negative values (extended sRGB).
 float SrgbToLinear(float encoded);
@@ -338,7 +361,8 @@ float LinearToSrgb(float linear);
 // Whether the camera sees the canvas whose frame is `canvas_from_scan` and whose rectangle spans
 // [0, extent_mm.x] x [0, extent_mm.y] at Z = 0: the canvas centre must be in front of the camera,
 // the camera on the canvas's front side (Z > 0 in the canvas frame: it is not looking at the back
-// of the canvas), and some of the canvas (a 9x9 lattice of points) must project into the image.
+// of the canvas), and some of the canvas (a 9x9 lattice of points) must project into the image,
+// or the ray through the image centre meet the canvas rectangle (a camera close to the canvas).
 // The error starts with `what` ("calib.json: images[3]") and says which of these fails.
 Status CheckCameraSeesCanvas(const Camera& camera, const RigidTransform& canvas_from_scan,
                              const Eigen::Vector2d& extent_mm, const std::string& what);

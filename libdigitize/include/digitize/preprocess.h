@@ -17,6 +17,8 @@
 
 namespace digitize {
 
+class ImageRegionReader;  // image_io.h
+
 struct PreprocessOptions {
   MergeOptions merge;
   SanitizeOptions sanitize;
@@ -89,5 +91,12 @@ Status CheckCanvasFolder(const std::filesystem::path& dir);
 // sizes that differ, a mask value that is no texel state, NaN/Inf heights or normals, a transform
 // whose rotation is not a rotation, boxes outside the grid.
 Result<PreprocessedCanvas> ReadPreprocessOutputs(const std::filesystem::path& dir);
+
+// The window [x0, x0 + width) x [y0, y0 + height) of a canvas folder (a tile and its halo), its
+// maps read through `reader` (image_io.h: a bounded cache, so a canvas larger than memory is read
+// a part at a time); field.window says where it lies, transform, frame and boxes are the whole
+// canvas's. Errors as ReadPreprocessOutputs, and a window not inside the canvas.
+Result<PreprocessedCanvas> ReadPreprocessWindow(const std::filesystem::path& dir, int x0, int y0,
+                                                int width, int height, ImageRegionReader& reader);
 
 }  // namespace digitize

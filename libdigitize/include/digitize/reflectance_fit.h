@@ -35,6 +35,7 @@
 #include "digitize/brdf_fit.h"
 #include "digitize/core.h"
 #include "digitize/height_field.h"
+#include "digitize/height_field_tracer.h"
 #include "digitize/photo_set.h"
 #include "digitize/reflectance_maps.h"
 #include "digitize/reflectance_samples.h"
@@ -143,11 +144,21 @@ struct TexelRect {
 // each one out can be killed and resume. A `done` error stops the run and is returned. Errors as
 // FitReflectance; a region not inside the canvas or empty.
 using RegionFitted = std::function<Status(size_t region, ReflectanceFitResult&& result)>;
+// What a caller that fits a canvas in several calls -- a tile at a time, each with the parts of
+// the photos that tile needs (LoadPhotoRegion) -- shares between the calls.
+struct SharedFitInputs {
+  const HeightFieldTracer* tracer = nullptr;  // built from the canvas; null: built by the call
+  // The photos the parts were cut from (headers only): the set-wide checks and counts (cameras
+  // against the canvas, distinct directions, lights below the canvas) are of these, as the
+  // whole canvas's fit would make them. Null: of `photos`.
+  const PhotoSet* whole_set = nullptr;
+};
 Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& normals,
                              const RigidTransform& canvas_from_scan, const PhotoSet& photos,
                              const ReflectanceFitOptions& options,
                              std::span<const TexelRect> regions, const RegionFitted& done,
-                             const ProgressCallback& progress = nullptr);
+                             const ProgressCallback& progress = nullptr,
+                             const SharedFitInputs& shared_inputs = {});
 
 // The report as JSON text (docs/formats.md, "fit report").
 std::string ReflectanceReportJson(const ReflectanceFitResult& result,

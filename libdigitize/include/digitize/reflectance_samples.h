@@ -119,6 +119,9 @@ struct SampleScene {
   const PhotoSet* photos = nullptr;              // pixels loaded
   const HeightFieldTracer* tracer = nullptr;     // built from *canvas
   const PixelTexelMaps* pixel_texels = nullptr;  // null: the footprint rule (see above)
+  // The photos are parts of photos (LoadPhotoRegion) whose wholes were checked against the canvas
+  // (CheckCamerasSeeCanvas): a part that sees a corner of the canvas need not pass the check.
+  bool cameras_checked = false;
 };
 
 // Input errors: sizes differ, photos not loaded, a camera that does not see the canvas or sits

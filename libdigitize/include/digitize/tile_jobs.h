@@ -43,20 +43,27 @@ struct TileRunOptions {
   std::vector<size_t> indices;  // tiles to fit; empty: every tile not done
   int threads = 0;              // worker threads (0 = all cores)
   bool redo = false;            // fit tiles that are done again
+  // Bound of the image cache the canvas windows and the photo parts are read through (MB).
+  size_t cache_mb = 1024;
 };
 
 struct TileRunReport {
   std::vector<size_t> fitted;   // this run
   std::vector<size_t> skipped;  // done already
   double seconds = 0;
-  std::string Brief() const;  // "fitted 4 tiles (3, 5, 6, 9), 12 done already; 41.2 s"
+  size_t peak_cache_bytes = 0;  // the most the image cache held
+  std::string Brief() const;    // "fitted 4 tiles (3, 5, 6, 9), 12 done already; 41.2 s"
 };
 
-// Fits the chosen tiles (in index order) with one load of the canvas and the photos and one
-// tracer for all of them (FitReflectanceRegions), writing each tile's folder as soon as it is
-// fitted. Checks first: the plan's inputs still there, the canvas the plan's size, the work
-// folder the plan's (created with its marker when missing), every index in range. Errors name
-// the plan, the tile or the input.
+// Fits the chosen tiles (in index order), one at a time, each from its own inputs: the window of
+// the canvas that holds the tile and a halo wide enough for every ray that can shadow or hide a
+// tile texel (from the plan's height range and the flattest light or camera over the tile), and
+// of each photo the pixels the tile projects to, read through one bounded image cache
+// (ImageRegionReader); so a job's memory follows the tile, not the canvas or the photo set. The
+// set-wide checks and counts are of the whole set's headers (SharedFitInputs). Each tile's folder
+// is written as soon as it is fitted. Checks first: the plan's inputs still there, the canvas the
+// plan's size, the work folder the plan's (created with its marker when missing), every index in
+// range. Errors name the plan, the tile or the input.
 Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
                                const ProgressCallback& progress = nullptr);
 

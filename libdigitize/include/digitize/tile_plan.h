@@ -41,6 +41,9 @@ struct TilePlan {
   std::filesystem::path work;    // tile results (tile_NNNNN/) and the merged fit (fit/)
   int canvas_width = 0, canvas_height = 0;
   int tile_size = 0;  // texels a side (the last column and row of tiles may be smaller)
+  // Lowest and highest height of the whole canvas (height.exr, mm): how far a shadow or view ray
+  // of a tile can travel below the relief's top, so how wide a halo each tile job reads.
+  double min_height_mm = 0, max_height_mm = 0;
   PhotoSetOptions photo;
   ReflectanceFitOptions fit;  // num_threads are the machine's: not stored (tiles run --threads)
   PackWriteOptions pack;
