@@ -623,8 +623,11 @@ void HeightFieldTracer::Intersect(std::span<const Vec3f> origins, std::span<cons
         const double X = r.ray.org_x + t * r.ray.dir_x, Y = r.ray.org_y + t * r.ray.dir_y;
         out.hit = true;
         out.t = r.ray.tfar;
-        out.texel_x = static_cast<float>(X * inv_pitch - 0.5 - impl.x0);
-        out.texel_y = static_cast<float>(impl.full_height - Y * inv_pitch - 0.5 - impl.y0);
+        // The full canvas's coordinates rounded to float first, then the window's offset taken
+        // off (exact in float): a window's hits are the full canvas's hits, shifted.
+        out.texel_x = static_cast<float>(X * inv_pitch - 0.5) - static_cast<float>(impl.x0);
+        out.texel_y = static_cast<float>(impl.full_height - Y * inv_pitch - 0.5) -
+                      static_cast<float>(impl.y0);
       }
     }
   };

@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# Canvas size against wall time and peak memory, per stage, for the untiled fit and for tile jobs
+# (docs/benchmarks.md, "Tiles"). Peak RSS is the kernel's (GNU time's %M: the process's maximum
+# resident set), so it counts everything: photos, canvas, tracer, OIIO's cache, the allocator.
+#   bench/tiles_bench.sh [SIZE ...]   texels along the canvas's longer side (default 1024 2048)
+# Env: TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
+# new one under /tmp, removed after), CSV (default docs/bench_tiles.csv).
+# Each tile runs as its own process (`tiles run --index I`), as a Slurm array task would, so its
+# peak RSS is the job's. The merged maps are compared with the untiled fit's (idiff -fail 0).
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+root=$PWD
+bin=$root/build/bin/digitize
+sizes=("$@")
+[ ${#sizes[@]} -gt 0 ] || sizes=(1024 2048)
+tile=${TILE:-512}
+lights=${LIGHTS:-16}
+csv=${CSV:-$root/docs/bench_tiles.csv}
+own_work=0
+if [ -z "${WORK:-}" ]; then
+  WORK=$(mktemp -d /tmp/tiles_bench.XXXXXX)
+  own_work=1
+fi
+trap '[ $own_work = 1 ] && rm -rf "$WORK"' EXIT
+
+# measure CMD...: runs CMD (its output to $WORK/last.log), prints "seconds peak_kB".
+measure() {
+  /usr/bin/time -o "$WORK/time" -f '%e %M' "$@" > "$WORK/last.log" 2>&1 ||
+    { cat "$WORK/last.log" >&2; echo "failed: $*" >&2; exit 1; }
+  tail -1 "$WORK/time"
+}
+
+echo "size,texels,photos,stage,seconds,peak_rss_mb,identical" > "$csv"
+printf '%-6s %-10s %-14s %9s %12s\n' size texels stage seconds peak_MB
+for n in "${sizes[@]}"; do
+  d=$WORK/s$n
+  rm -rf "$d"
+  mkdir -p "$d"
+  row() {  # stage seconds kB [identical]
+    local mb=$(( $3 / 1024 ))
+    printf '%-6s %-10s %-14s %9.1f %12d\n' "$n" "$texels" "$1" "$2" "$mb"
+    echo "$n,$texels,$lights,$1,$2,$mb,${4:-}" >> "$csv"
+  }
+  texels=0
+  read -r s kb < <(measure "$bin" synth -o "$d/synth" --resolution "$n" --photos --lights "$lights")
+  row synth "$s" "$kb"
+  read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas")
+  texels=$(oiiotool --info "$d/canvas/height.exr" |
+             sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
+  row preprocess "$s" "$kb"
+  read -r s kb < <(measure "$bin" fit --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
+                     -o "$d/fit")
+  row fit_untiled "$s" "$kb"
+  read -r s kb < <(measure "$bin" tiles plan --canvas "$d/canvas" \
+                     --photos "$d/synth/photos/calib.json" --plan "$d/plan.json" \
+                     --out "$d/tiled.pack.exr" --tile-size "$tile")
+  row tiles_plan "$s" "$kb"
+  count=$("$bin" tiles status "$d/plan.json" 2>&1 | grep -oE '[0-9]+ of [0-9]+ tiles' |
+          head -1 | awk '{print $3}') || true
+  total=0 peak=0
+  for ((i = 0; i < count; ++i)); do
+    read -r s kb < <(measure "$bin" tiles run "$d/plan.json" --index "$i")
+    total=$(awk -v a="$total" -v b="$s" 'BEGIN {print a + b}')
+    [ "$kb" -gt "$peak" ] && peak=$kb
+  done
+  row "tile_jobs_x$count" "$total" "$peak"
+  read -r s kb < <(measure "$bin" tiles merge "$d/plan.json")
+  same=yes
+  for f in "$d"/fit/*.exr; do
+    idiff -fail 0 -warn 0 -a "$f" "$d/plan.tiles/fit/$(basename "$f")" > /dev/null || same=no
+  done
+  row tiles_merge "$s" "$kb" "$same"
+  rm -rf "$d"
+done
+echo "wrote $csv"
