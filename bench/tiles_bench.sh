@@ -3,14 +3,14 @@
 # (docs/benchmarks.md, "Tiles"). Peak RSS is the kernel's (GNU time's %M: the process's maximum
 # resident set), so it counts everything: photos, canvas, tracer, OIIO's cache, the allocator.
 #   bench/tiles_bench.sh [SIZE ...]   texels along the canvas's longer side (default 1024 2048)
-# Env: TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
+# Env: BIN (the digitize executable, default build/bin/digitize), TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
 # new one under /tmp, removed after), CSV (default docs/bench_tiles.csv).
 # Each tile runs as its own process (`tiles run --index I`), as a Slurm array task would, so its
 # peak RSS is the job's. The merged maps are compared with the untiled fit's (idiff -fail 0).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 root=$PWD
-bin=$root/build/bin/digitize
+bin=${BIN:-$root/build/bin/digitize}
 sizes=("$@")
 [ ${#sizes[@]} -gt 0 ] || sizes=(1024 2048)
 tile=${TILE:-512}
