@@ -43,6 +43,7 @@ set(DIGITIZE_RELIEF_SOURCES
 set(DIGITIZE_PREPROCESS_HEADERS preprocess.h)
 set(DIGITIZE_PREPROCESS_SOURCES
   preprocess.cpp
+  preprocess_patches.cpp  # PreprocessPatches, the patch list and the registration report
 )
 
 set(DIGITIZE_PHOTOS_HEADERS photo_set.h rti_basis.h rti_export.h)
