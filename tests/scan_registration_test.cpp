@@ -10,16 +10,23 @@
 #include "digitize/scan_registration.h"
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include "digitize/preprocess.h"
+#include "digitize/scan_io.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/patch_sim.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_support.h"
 
 namespace digitize {
 namespace {
@@ -255,6 +262,139 @@ TEST(ScanRegistration, OptionsValidate) {
   o = {};
   o.icp_levels = 0;
   EXPECT_FALSE(o.Validate().ok());
+}
+
+TEST(ScanRegistration, PatchListErrorsNameTheFileAndKey) {
+  const std::filesystem::path dir = test::FreshScratchDir("scan_registration_list");
+  const std::filesystem::path list = dir / "poses.json";
+  std::ofstream(list) << R"({"format": "digitize.scan_patches", "version": 1, "patches": [
+      {"scan": "a.exr", "rig_from_scan": {"rotation": [[1,0,0],[0,1,0],[0,0,1]],
+                                          "translation_mm": [0, 0, 500]}},
+      {"scan": "b.exr", "rig_from_scan": {"rotation": [[2,0,0],[0,1,0],[0,0,1]],
+                                          "translation_mm": [100, 0, 500]}}]})";
+  Result<std::vector<PatchListEntry>> r = ReadPatchList(list);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message.find("poses.json"), std::string::npos) << r.error().message;
+  EXPECT_NE(r.error().message.find("patches[1].rig_from_scan"), std::string::npos)
+      << r.error().message;
+  std::filesystem::remove_all(dir);
+}
+
+// The command line: `digitize synth --patches` writes a set, `digitize preprocess --patches`
+// registers it, and its registration.json holds poses within a quarter texel of the truth the
+// synth wrote beside the scans. Then the refusals: too few patches, a missing scan, an output
+// folder the tool did not write; each non-zero, naming the file, and no output left behind.
+struct Cli {
+  int exit_code = -1;
+  std::string text;
+};
+
+Cli RunCli(const std::string& args, const std::filesystem::path& log) {
+  const std::string command =
+      "(" + std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() + " 2>&1";
+  const int status = std::system(command.c_str());
+  Cli out;
+  out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(log);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  out.text = ss.str();
+  return out;
+}
+
+RigidTransform PoseOf(const nlohmann::json& j) {
+  RigidTransform t;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) t.rotation(r, c) = j["rotation"][r][c].get<double>();
+    t.translation[r] = j["translation_mm"][r].get<double>();
+  }
+  return t;
+}
+
+nlohmann::json ReadJson(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+TEST(ScanRegistration, Cli) {
+  const std::filesystem::path dir = test::FreshScratchDir("scan_registration_cli");
+  const std::filesystem::path log = dir / "log.txt";
+  const std::string set = (dir / "set").string(), out = (dir / "canvas").string();
+  Cli synth = RunCli("synth -o " + set +
+                         " --width-mm 300 --height-mm 220 --patches 2x2 --scan-size 200 150 "
+                         "--tilt-deg 3 --roll-deg 1 --seed 3",
+                     log);
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  Cli pre = RunCli("preprocess --patches " + set + "/patches.json -o " + out, log);
+  ASSERT_EQ(pre.exit_code, 0) << pre.text;
+  EXPECT_NE(pre.text.find("register: 4 patches registered, 6 overlaps"), std::string::npos)
+      << pre.text;
+  for (const char* f : kCanvasFolderFiles) EXPECT_TRUE(std::filesystem::exists(dir / "canvas" / f));
+  const nlohmann::json reg = ReadJson(dir / "canvas" / "registration.json");
+  EXPECT_EQ(reg["format"], "digitize.patch_registration");
+  ASSERT_EQ(reg["patches"].size(), 4u);
+  ASSERT_GE(reg["overlaps"].size(), 3u);
+  for (const nlohmann::json& o : reg["overlaps"]) {
+    EXPECT_GT(o["texels"].get<double>(), 0);
+    EXPECT_LE(o["rms_mm"].get<double>(), kMaxOverlapRmsMm);
+  }
+  // Registration error against truth_patches.json, as Measure does (gauge: patch 0), over the
+  // patches' own sample grids: the scans are read back for their points.
+  const nlohmann::json truth = ReadJson(dir / "set" / "truth_patches.json");
+  const double pitch = reg["pitch_mm"].get<double>();
+  const RigidTransform gauge = PoseOf(truth["patches"][0]["canvas_from_scan"]) *
+                               PoseOf(reg["patches"][0]["rig_from_scan"]).Inverse();
+  double worst = 0;
+  for (size_t i = 0; i < 4; ++i) {
+    Result<Scan> scan = ReadScan(dir / "set" / truth["patches"][i]["scan"].get<std::string>(), {});
+    ASSERT_TRUE(scan.ok()) << scan.error().message;
+    const RigidTransform est = gauge * PoseOf(reg["patches"][i]["rig_from_scan"]);
+    const RigidTransform tru = PoseOf(truth["patches"][i]["canvas_from_scan"]);
+    for (const Vec3f& p : scan->xyz_mm.data) {
+      if (!IsValid(p)) continue;
+      const Vec3d q = p.cast<double>();
+      const Vec3d c = tru.Apply(q);
+      // Canvas points only (the frame and wall are no part of the registration).
+      if (c.x() < 0 || c.y() < 0 || c.x() > 300 || c.y() > 220 || std::abs(c.z()) > 10) continue;
+      worst = std::max(worst, (est.Apply(q) - c).norm() / pitch);
+    }
+  }
+  std::printf("CLI: registration error %.3f texels (pitch %.3f mm)\n", worst, pitch);
+  EXPECT_LE(worst, kMaxRegistrationErrorTexels);
+
+  // One patch only: refused, naming the list, nothing written.
+  nlohmann::json list = ReadJson(dir / "set" / "patches.json");
+  nlohmann::json one = list;
+  one["patches"] = nlohmann::json::array({list["patches"][0]});
+  std::ofstream(dir / "set" / "one.json") << one.dump();
+  const std::string out2 = (dir / "canvas2").string();
+  Cli few = RunCli("preprocess --patches " + set + "/one.json -o " + out2, log);
+  EXPECT_NE(few.exit_code, 0);
+  EXPECT_NE(few.text.find("one.json"), std::string::npos) << few.text;
+  EXPECT_NE(few.text.find("at least 2"), std::string::npos) << few.text;
+  EXPECT_FALSE(std::filesystem::exists(out2));
+  // A scan the list names that is not there.
+  nlohmann::json missing = list;
+  missing["patches"][2]["scan"] = "nope.exr";
+  std::ofstream(dir / "set" / "missing.json") << missing.dump();
+  Cli gone = RunCli("preprocess --patches " + set + "/missing.json -o " + out2, log);
+  EXPECT_NE(gone.exit_code, 0);
+  EXPECT_NE(gone.text.find("nope.exr"), std::string::npos) << gone.text;
+  EXPECT_FALSE(std::filesystem::exists(out2));
+  // An output folder holding something the tool did not write: left alone.
+  std::filesystem::create_directories(out2);
+  std::ofstream(dir / "canvas2" / "notes.txt") << "mine";
+  Cli keep = RunCli("preprocess --patches " + set + "/patches.json -o " + out2, log);
+  EXPECT_NE(keep.exit_code, 0);
+  EXPECT_TRUE(std::filesystem::exists(dir / "canvas2" / "notes.txt"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "canvas2" / "registration.json"));
+  // Scans and a patch list at once: a usage error.
+  Cli both = RunCli("preprocess " + set + "/patch_0_0.exr --patches " + set + "/patches.json -o " +
+                        (dir / "canvas3").string(),
+                    log);
+  EXPECT_NE(both.exit_code, 0);
+  EXPECT_FALSE(std::filesystem::exists(dir / "canvas3"));
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
