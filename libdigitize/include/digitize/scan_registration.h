@@ -2,7 +2,7 @@
 // pose that MergeExposures takes). A structured-light head covers ~300 x 400 mm, so a large
 // painting is scanned as a grid of patches; the rig reports each head pose only roughly (a few mm,
 // about a degree). This stage registers the patches rigidly, merges them into one canvas height
-// field and measures the residual in every overlap (docs/architecture.md, "Patches").
+// field and measures the residual in every overlap (docs/formats.md, "Patch lists").
 //
 // Steps, per patch in the order of a breadth-first walk from patch 0 over the overlaps (the
 // patch with the largest overlap with those already placed comes next):
