@@ -174,7 +174,7 @@ void RunCase(const Case& c) {
         "[%s]   %s: corrected %.3f deg, %.2f mm (max %.2f mm); %d tiles, peak %.3f; %d ICP "
         "rounds, last %.4f mm\n",
         c.name.c_str(), p.source.c_str(), p.correction_deg, p.correction_mm, p.max_correction_mm,
-        p.correlation_tiles, p.correlation_peak, p.icp_rounds, p.last_icp_move_mm);
+        p.correlation_pieces, p.correlation_peak, p.icp_rounds, p.last_icp_move_mm);
   std::printf(
       "[%s] registration error %.3f texels (pitch %.3f mm); seam RMS %.4f mm over %zu "
       "texels, single-patch RMS %.4f mm over %zu\n",

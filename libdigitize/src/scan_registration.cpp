@@ -1,6 +1,6 @@
-// RegisterPatches (scan_registration.h): coarse alignment (plane + tiled phase correlation),
-// OpenCV contrib's robust point-to-plane ICP, resampling and blending onto one canvas grid, and
-// the overlap residuals.
+// RegisterPatches (scan_registration.h): coarse alignment (plane + correlation of the relief),
+// OpenCV contrib's robust point-to-plane ICP, a height-field polish, resampling and blending onto
+// one canvas grid, and the overlap residuals.
 //
 // Working frame "M": patch 0's own canvas frame (ExtractCanvas on it) at its nominal pose, so that
 // heights are Z and the canvas plane is roughly Z = 0 for every patch. Poses are kept as
@@ -11,7 +11,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <opencv2/core.hpp>
@@ -771,7 +770,7 @@ Result<PatchRegistrationResult> RegisterPatches(const std::vector<ScanPatch>& in
                    "); check its pose in the patch list, or scan with more overlap"};
     }
     Patch& p = patches[static_cast<size_t>(best)];
-    // Coarse, twice: plane, then tiled phase correlation.
+    // Coarse, twice: plane, then the correlation of the relief.
     for (int pass = 0; pass < 2; ++pass) {
       const cv::Mat overlap =
           pass == 0 ? best_overlap
@@ -784,7 +783,7 @@ Result<PatchRegistrationResult> RegisterPatches(const std::vector<ScanPatch>& in
         return Error{p.name() + ": too few samples in its overlap with the placed patches"};
       p.m_from_scan = PlaneStep(mine, theirs) * p.m_from_scan;
       Result<RigidTransform> c =
-          CorrelationStep(patches, best, placed, g, options, &p.report.correlation_tiles,
+          CorrelationStep(patches, best, placed, g, options, &p.report.correlation_pieces,
                           &p.report.correlation_peak);
       if (!c.ok()) return c.error();
       p.m_from_scan = *c * p.m_from_scan;

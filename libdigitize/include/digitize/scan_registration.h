@@ -74,10 +74,11 @@ struct PatchRegistrationOptions {
   double lowpass_mm = 1.2;        // Gaussian sigma smoothed away before correlating (noise, weave)
   double highpass_mm = 6;         // Gaussian sigma of the low-pass removed before correlating
                                   // (bow, tilt: only relief is correlated)
-  double smooth_mm = 0.3;  // Gaussian sigma of the samples ICP and the polish see (the weave)
+  double smooth_mm = 0.3;  // Gaussian sigma of the samples ICP and the polish see (noise; more
+                           // blunts the strokes' flanks that hold the in-plane fit)
   double search_mm = 6;    // the coarse correlation looks this far from the nominal
   double min_correlation_peak = 0.5;  // normalised correlation peak (-1..1) below which an
-                                      // overlap has no relief to register (noise alone: < 0.3)
+                                      // overlap has no relief to register (relief: 0.6-0.97)
   int icp_iterations = 60;            // per pyramid level of one ICP call
   int icp_levels = 1;                 // ICP pyramid levels (coarser levels subsample both clouds
                                       // alike: on a flat canvas their matches are false and the
@@ -91,7 +92,7 @@ struct PatchRegistrationOptions {
   double converged_mm = 0.02;         // a round that moves no patch point more: converged
                                       // (1/45 texel at 0.9 mm)
   int max_icp_rounds = 12;            // ICP rounds per registration before "did not converge"
-  int global_rounds = 2;              // passes of every patch against all others
+  int global_rounds = 2;              // polish passes of every patch against all others
   double max_correction_mm = 25;      // a correction moving a canvas point more: an error
   double max_overlap_rms_mm = 0.15;   // an overlap whose height residual RMS is larger: an error
   double feather_mm = 8;              // blend ramp at each patch's border
@@ -112,9 +113,9 @@ struct PatchReport {
   double correction_deg = 0;     // rotation of registered * nominal^-1
   double correction_mm = 0;      // how far it moved the patch's canvas centroid
   double max_correction_mm = 0;  // how far it moved the farthest canvas point of the patch
-  int correlation_tiles = 0;     // overlap pieces whose correlation was used (placement)
+  int correlation_pieces = 0;    // overlap pieces whose correlation was used (placement)
   double correlation_peak = 0;   // their lowest normalised correlation peak (-1..1)
-  int icp_rounds = 0;            // ICP rounds in all passes
+  int icp_rounds = 0;            // ICP rounds when it was placed
   double last_icp_move_mm = 0;   // largest point move of the last ICP round
   size_t canvas_points = 0;      // valid canvas samples of the patch
   bool outline_fitted = false;   // its canvas outline gave an in-plane axis
