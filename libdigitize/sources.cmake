@@ -15,7 +15,7 @@ set(DIGITIZE_IO_SOURCES
   transform_json.cpp  # RigidTransform to and from JSON
 )
 
-set(DIGITIZE_CANVAS_HEADERS scan.h canvas.h resample.h)
+set(DIGITIZE_CANVAS_HEADERS scan.h canvas.h resample.h scan_registration.h)
 set(DIGITIZE_CANVAS_SOURCES
   scan.cpp
   canvas.cpp           # ExtractCanvas: the driver over the steps below
@@ -27,6 +27,7 @@ set(DIGITIZE_CANVAS_SOURCES
   resample.cpp         # ResampleToCanvasGrid: the driver and rasterisation
   resample_holes.cpp   # hole filling, texel states
   mask_ops.cpp    # OpenCV morphology shared by canvas.cpp and resample.cpp
+  scan_registration.cpp  # overlapping patches: phase correlation, OpenCV contrib ICP, merge
 )
 
 set(DIGITIZE_RELIEF_HEADERS relief.h normals.h photometric_stereo.h normal_integration.h
@@ -42,6 +43,7 @@ set(DIGITIZE_RELIEF_SOURCES
 set(DIGITIZE_PREPROCESS_HEADERS preprocess.h)
 set(DIGITIZE_PREPROCESS_SOURCES
   preprocess.cpp
+  preprocess_patches.cpp  # PreprocessPatches, the patch list and the registration report
 )
 
 set(DIGITIZE_PHOTOS_HEADERS photo_set.h rti_basis.h rti_export.h)

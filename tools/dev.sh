@@ -19,6 +19,7 @@ jobs=$(nproc 2>/dev/null || echo 2)
 packages=(
   build-essential cmake ninja-build pkg-config git
   libeigen3-dev libopencv-dev libceres-dev libopenimageio-dev openimageio-tools
+  libopencv-contrib-dev     # surface_matching: the ICP that registers overlapping scans
   libembree-dev libcgal-dev libopenmesh-dev libtbb-dev libcli11-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev gnuplot-nox
   clang libclang-rt-14-dev  # the fuzz targets: clang's libFuzzer + sanitizer runtimes

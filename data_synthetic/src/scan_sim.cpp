@@ -66,6 +66,7 @@ RigidTransform ScanFromCanvas(const Painting& painting, const ScanSimOptions& o)
   RigidTransform t;
   t.rotation = tilt * roll * upright;
   Vec3d centre_canvas(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0);
+  if (o.aim_mm.allFinite()) centre_canvas = Vec3d(o.aim_mm.x(), o.aim_mm.y(), 0);
   Vec3d centre_scan(o.offset_mm.x(), o.offset_mm.y(), o.distance_mm + o.offset_mm.z());
   t.translation = centre_scan - t.rotation * centre_canvas;
   return t;
@@ -90,6 +91,15 @@ Camera MakeCamera(const Painting& painting, const FrameOptions& frame, const Sca
   cam.model = o.model;
   cam.width = o.width_px;
   cam.height = o.height_px;
+  if (o.field_mm.x() > 0 && o.field_mm.y() > 0) {  // a patch: the field at the aim's distance
+    const double pitch = std::max(o.field_mm.x() / o.width_px, o.field_mm.y() / o.height_px);
+    if (o.model == ScannerModel::kOrthographic) {
+      cam.pitch_mm = pitch;
+    } else {
+      cam.focal_px = (o.distance_mm + o.offset_mm.z()) / pitch;
+    }
+    return cam;
+  }
   const double scale = 1 + o.field_margin;
   const Vec3d centre =
       scan_from_canvas.Apply(Vec3d(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0));
@@ -194,6 +204,13 @@ Status ScanSimOptions::Validate() const {
                 FormatNumber(hole_blob_radius_px));
   if (!(outliers >= 0 && outliers <= 1))
     return fail("outliers must be in [0, 1], got " + FormatNumber(outliers));
+  if (!(std::isnan(aim_mm.x()) && std::isnan(aim_mm.y())) && !aim_mm.allFinite())
+    return fail("aim_mm must be finite (or both NaN: the canvas centre)");
+  if (!(field_mm.allFinite() && field_mm.minCoeff() >= 0 && field_mm.maxCoeff() <= 1e5))
+    return fail("field_mm must be in [0, 100000] mm");
+  if (!pose_error.rotation.allFinite() || !pose_error.translation.allFinite() ||
+      !(pose_error.rotation.transpose() * pose_error.rotation).isApprox(Mat3d::Identity(), 1e-9))
+    return fail("pose_error must be a rigid transform");
   if (exposures < 1 || exposures > 64)
     return fail("exposures must be in [1, 64], got " + std::to_string(exposures));
   return Status::Ok();
@@ -208,9 +225,9 @@ SyntheticScan SimulateScan(const Scene& scene, const ScanSimOptions& options) {
   SyntheticScan out;
   out.options = options;
   out.frame = scene.frame();
-  const RigidTransform scan_from_canvas = ScanFromCanvas(painting, options);
-  out.canvas_from_scan = scan_from_canvas.Inverse();
-  const Camera cam = MakeCamera(painting, scene.frame(), options, scan_from_canvas);
+  const RigidTransform nominal_scan_from_canvas = ScanFromCanvas(painting, options);
+  const Camera cam = MakeCamera(painting, scene.frame(), options, nominal_scan_from_canvas);
+  out.canvas_from_scan = options.pose_error * nominal_scan_from_canvas.Inverse();
   out.pixel_pitch_mm = cam.pitch_mm;
   out.focal_px = cam.focal_px;
 

@@ -90,9 +90,50 @@ Result<PackSummary> PackFromFolders(const fs::path& canvas_dir, const fs::path& 
   return InspectPack(out);
 }
 
+// The patch list, then every scan it names, all before any work; the folder checked against
+// all of them first.
+static Result<PreprocessResult> PreprocessPatchesToFolder(const PreprocessFolderOptions& options,
+                                                          const ProgressCallback& progress) {
+  if (!options.scans.empty())
+    return Error{"preprocess: give either scans or a patch list (--patches " + options.patches +
+                 "), not both"};
+  if (!options.read.mask.empty())
+    return Error{"preprocess: --mask applies to one scan, not to a patch list (" + options.patches +
+                 ")"};
+  if (Status s = options.registration.Validate(); !s.ok())
+    return Error{"registration options: " + s.message()};
+  Result<std::vector<PatchListEntry>> list = ReadPatchList(options.patches);
+  if (!list.ok()) return list.error();
+  if (list->size() < 2)
+    return Error{options.patches + ": " + std::to_string(list->size()) +
+                 " patch(es) listed, registration needs at least 2"};
+  FolderOutput output{"preprocess", "canvas", {fs::path(options.patches)}};
+  std::vector<std::string> sources;
+  for (const PatchListEntry& e : *list) {
+    output.inputs.push_back(e.scan);
+    sources.push_back(e.scan.string());
+  }
+  if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
+  std::vector<ScanPatch> patches;
+  for (const PatchListEntry& e : *list) {
+    Result<Scan> scan = ReadScan(e.scan, options.read);
+    if (!scan.ok()) return scan.error();
+    patches.push_back({std::move(scan).value(), e.rig_from_scan});
+  }
+  Result<PreprocessResult> result =
+      PreprocessPatches(std::move(patches), options.preprocess, options.registration, progress);
+  if (!result.ok()) return result.error();
+  Status written = WriteDirectoryAtomically(options.out, output, [&](const fs::path& dir) {
+    return WritePreprocessOutputs(dir, *result, options.preprocess, sources);
+  });
+  if (!written.ok()) return Error{written.message()};
+  return result;
+}
+
 Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& options,
                                             const ProgressCallback& progress) {
   if (Status s = options.preprocess.Validate(); !s.ok()) return Error{s.message()};
+  if (!options.patches.empty()) return PreprocessPatchesToFolder(options, progress);
   FolderOutput output{"preprocess", "canvas", {options.scans.begin(), options.scans.end()}};
   if (!options.read.mask.empty()) output.inputs.emplace_back(options.read.mask);
   if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};

@@ -42,6 +42,44 @@ bool AllFinite(const Grid<T>& grid) {
   return true;
 }
 
+// Relief and normals of a merged canvas field: the steps Preprocess and PreprocessPatches share.
+void FinishPreprocess(PreprocessResult& result, const PreprocessOptions& options,
+                      const ProgressCallback& progress) {
+  const CanvasResult& c = result.canvas;
+  auto step = [&](const char* name, Clock::time_point t0, std::string line) {
+    result.steps.push_back({name, SecondsSince(t0), std::move(line)});
+  };
+  auto t0 = Clock::now();
+  ReportProgress(progress, "relief", 4.0 / kSteps);
+  ReliefOptions relief_options = options.relief;
+  if (options.noise_margin_from_scan) {
+    // The max of N Gaussian samples reaches ~5 sigma for N ~ 10^6: below 8 sigma, the "relief" of
+    // a flat canvas is its noise. The margin is capped so it never swallows delta0 itself.
+    const double sigma = c.noise_sigma_mm;
+    relief_options.min_relief_mm = std::max(relief_options.min_relief_mm, 8.0 * sigma);
+    relief_options.noise_margin_mm = 2.0 * sigma;
+  }
+  result.relief = ClassifyRelief(result.field, relief_options);
+  const ReliefResult& r = result.relief;
+  step("relief", t0,
+       Format("relief: max height %.3f mm, delta0 %.3f mm; %zu texels above in %zu component(s) "
+              "(%zu specks removed); %zu boxes of %dx%d texels",
+              r.max_height_mm, r.delta0_mm, r.texels_above, r.components_kept, r.components_removed,
+              r.boxes.size(), r.cell_px, r.cell_px));
+
+  t0 = Clock::now();
+  ReportProgress(progress, "normals", 5.0 / kSteps);
+  result.normals = ComputeNormals(result.field);
+  step("normals", t0,
+       Format("normals: %dx%d from 8-neighbourhood triangles", result.normals.width,
+              result.normals.height));
+  ReportProgress(progress, "done", 1.0);
+
+  // The contract is "no NaN/Inf ever leaves a stage": a violation is a bug, not bad input.
+  DIGITIZE_CHECK(AllFinite(result.field.height_mm), "preprocess produced a non-finite height");
+  DIGITIZE_CHECK(AllFinite(result.normals), "preprocess produced a non-finite normal");
+}
+
 }  // namespace
 
 Status PreprocessOptions::Validate() const {
@@ -141,35 +179,50 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
               result.field.width(), result.field.height(), result.field.pitch_mm, rs.measured,
               rs.filled, rs.holes_filled, rs.unfilled, rs.holes_unfilled));
 
-  t0 = Clock::now();
-  ReportProgress(progress, "relief", 4.0 / kSteps);
-  ReliefOptions relief_options = options.relief;
-  if (options.noise_margin_from_scan) {
-    // The max of N Gaussian samples reaches ~5 sigma for N ~ 10^6: below 8 sigma, the "relief" of
-    // a flat canvas is its noise. The margin is capped so it never swallows delta0 itself.
-    const double sigma = c.noise_sigma_mm;
-    relief_options.min_relief_mm = std::max(relief_options.min_relief_mm, 8.0 * sigma);
-    relief_options.noise_margin_mm = 2.0 * sigma;
+  FinishPreprocess(result, options, progress);
+  result.total_seconds = SecondsSince(start);
+  return result;
+}
+
+Result<PreprocessResult> PreprocessPatches(std::vector<ScanPatch> patches,
+                                           const PreprocessOptions& options,
+                                           const PatchRegistrationOptions& registration,
+                                           const ProgressCallback& progress) {
+  if (Status s = options.Validate(); !s.ok()) return Error{s.message()};
+  if (Status s = registration.Validate(); !s.ok())
+    return Error{"registration options: " + s.message()};
+  PreprocessResult result;
+  const auto start = Clock::now();
+  auto t0 = Clock::now();
+  ReportProgress(progress, "sanitize", 1.0 / kSteps);
+  for (ScanPatch& p : patches) {
+    const SanitizeStats ss = SanitizeScan(p.scan, options.sanitize);
+    result.sanitize.total += ss.total, result.sanitize.valid += ss.valid;
+    result.sanitize.missing += ss.missing, result.sanitize.non_finite += ss.non_finite;
+    result.sanitize.spikes += ss.spikes;
   }
-  result.relief = ClassifyRelief(result.field, relief_options);
-  const ReliefResult& r = result.relief;
-  step("relief", t0,
-       Format("relief: max height %.3f mm, delta0 %.3f mm; %zu texels above in %zu component(s) "
-              "(%zu specks removed); %zu boxes of %dx%d texels",
-              r.max_height_mm, r.delta0_mm, r.texels_above, r.components_kept, r.components_removed,
-              r.boxes.size(), r.cell_px, r.cell_px));
+  const SanitizeStats& ss = result.sanitize;
+  result.steps.push_back(
+      {"sanitize", SecondsSince(t0),
+       Format("sanitize: %zu patch scans, %zu of %zu samples valid (%.1f %%); %zu missing, %zu "
+              "non-finite or absurd, %zu isolated spikes removed",
+              patches.size(), ss.valid, ss.total, Percent(ss.valid, ss.total), ss.missing,
+              ss.non_finite, ss.spikes)});
 
   t0 = Clock::now();
-  ReportProgress(progress, "normals", 5.0 / kSteps);
-  result.normals = ComputeNormals(result.field);
-  step("normals", t0,
-       Format("normals: %dx%d from 8-neighbourhood triangles", result.normals.width,
-              result.normals.height));
-  ReportProgress(progress, "done", 1.0);
-
-  // The contract is "no NaN/Inf ever leaves a stage": a violation is a bug, not bad input.
-  DIGITIZE_CHECK(AllFinite(result.field.height_mm), "preprocess produced a non-finite height");
-  DIGITIZE_CHECK(AllFinite(result.normals), "preprocess produced a non-finite normal");
+  ReportProgress(progress, "register", 2.0 / kSteps);
+  Result<PatchRegistrationResult> r =
+      RegisterPatches(patches, registration, options.canvas, options.resample);
+  if (!r.ok()) return r.error();
+  result.canvas = r->canvas;
+  result.field = r->field;
+  result.resample = r->resample;
+  result.merge.exposures = 1;
+  std::string line = "register: " + r->brief;
+  for (const std::string& w : r->canvas.warnings) line += "; WARNING: " + w;
+  result.steps.push_back({"register", SecondsSince(t0), line});
+  result.registration = std::move(r).value();
+  FinishPreprocess(result, options, progress);
   result.total_seconds = SecondsSince(start);
   return result;
 }
@@ -348,6 +401,12 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   }
   if (Status s = WriteTextFile(dir / "transform.json", transform.dump(2) + "\n"); !s.ok()) return s;
 
+  if (result.registration) {
+    if (Status s = WriteTextFile(dir / "registration.json",
+                                 PatchRegistrationJson(*result.registration, inputs));
+        !s.ok())
+      return s;
+  }
   return WriteTextFile(dir / "report.json", PreprocessReportJson(result, options, inputs));
 }
 

@@ -1,4 +1,4 @@
-// `digitize preprocess`: scan(s) -> a canvas folder.
+// `digitize preprocess`: scan(s), or a patch list of overlapping scans, -> a canvas folder.
 #include <cstdio>
 #include <memory>
 
@@ -11,6 +11,7 @@ namespace {
 
 struct PreprocessArgs {
   std::vector<std::string> scans;
+  std::string patches;
   std::string out;
   ScanReadOptions read;
   std::string mask;
@@ -20,8 +21,11 @@ struct PreprocessArgs {
 
 int RunPreprocess(const PreprocessArgs& args) {
   const std::string cmd = "preprocess";
+  if (args.scans.empty() == args.patches.empty())
+    return Fail(cmd, "give the scan(s) of one pose, or --patches LIST of overlapping scans");
   PreprocessFolderOptions o;
   o.scans = args.scans;
+  o.patches = args.patches;
   o.read = ScanReadOptionsOf(args.read, args.mask, args.grid);
   o.preprocess = args.options;
   o.out = args.out;
@@ -33,8 +37,8 @@ int RunPreprocess(const PreprocessArgs& args) {
     std::printf("%6.3fs  %s\n", step.seconds, step.line.c_str());
   std::printf(
       "total %.3f s; outputs in %s/ (height.exr, normals.exr, mask.png, boxes.json, "
-      "transform.json, report.json)\n",
-      result->total_seconds, args.out.c_str());
+      "transform.json, report.json%s)\n",
+      result->total_seconds, args.out.c_str(), result->registration ? ", registration.json" : "");
   return 0;
 }
 
@@ -45,11 +49,15 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
   CLI::App* c = app.add_subcommand(
       "preprocess",
       "Scan of a framed painting -> canvas height field (EXR, mm), normals, mask, relief boxes, "
-      "transform and report.\nSeveral scans = several exposures of one pose, merged.");
+      "transform and report.\nSeveral scans = several exposures of one pose, merged; "
+      "--patches = overlapping scans of one painting, registered and merged.");
   c->add_option("scans", args->scans,
                 "Scan file(s): float EXR/TIFF (XYZ mm, or depth with --pixel-pitch-mm), 16-bit "
                 "PNG/TIFF (with --height-scale-mm), PLY point grid")
-      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--patches", args->patches,
+                "Patch list (JSON, docs/formats.md): overlapping scans with their nominal rig "
+                "poses; registered, merged, registration.json written beside the canvas")
       ->check(CLI::ExistingFile);
   c->add_option("-o,--out", args->out,
                 "Output folder: new, empty, or an earlier canvas output (replaced only on success)")

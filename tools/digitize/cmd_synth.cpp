@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "digitize/output_dir.h"
 #include "digitize_synth/painting.h"
+#include "digitize_synth/patch_sim.h"
 #include "digitize_synth/photo_sim.h"
 #include "digitize_synth/rti_sim.h"
 #include "digitize_synth/scan_sim.h"
@@ -32,7 +33,62 @@ struct SynthArgs {
   bool rti = false;
   synth::RtiSimOptions rti_options;
   std::string rti_encoding = "srgb8";
+  // Overlapping patches (--patches CxR) instead of one scan.
+  std::string patches;
+  synth::PatchGridOptions grid;
+  std::vector<double> tilted_patch;
+  bool resolution_given = false;
 };
+
+// --patches: the painting scanned as a grid of overlapping patches (patch_sim.h), each patch the
+// --scan-size / --model / tilt / noise scan of its part; patches.json (nominal poses) and
+// truth_patches.json (true poses) beside them.
+int RunSynthPatches(SynthArgs& args) {
+  const std::string cmd = "synth";
+  int columns = 0, rows = 0;
+  char x = 0, extra = 0;
+  if (std::sscanf(args.patches.c_str(), "%d%c%d%c", &columns, &x, &rows, &extra) != 3 ||
+      (x != 'x' && x != 'X'))
+    return Fail(cmd, "--patches must be COLUMNSxROWS (e.g. 3x2), got \"" + args.patches + "\"");
+  if (args.photos || args.rti) return Fail(cmd, "--patches cannot be combined with --photos/--rti");
+  synth::PatchGridOptions& g = args.grid;
+  g.columns = columns, g.rows = rows;
+  g.scan = args.scan;
+  g.seed = args.painting.seed;
+  if (args.tilted_patch.size() == 2)
+    g.tilted_patch = static_cast<int>(args.tilted_patch[0]),
+    g.tilted_patch_deg = args.tilted_patch[1];
+  if (Status s = g.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (!args.resolution_given)
+    args.painting.resolution_px = synth::MatchedPatchResolution(args.painting, g);
+  if (Status s = args.painting.Validate(); !s.ok()) return Fail(cmd, s.message());
+  if (Status s = args.frame.ValidateFor(args.painting.width_mm, args.painting.height_mm); !s.ok())
+    return Fail(cmd, s.message());
+  const FolderOutput output{cmd, "synth", {}};
+  if (Status s = CheckFolderOutput(args.out, output); !s.ok()) return Fail(cmd, s.message());
+  ProgressBar bar("synth");
+  bar.Update("painting", 0.0);
+  const synth::Painting painting = synth::MakePainting(args.painting);
+  bar.Update("scene", 0.3);
+  const synth::Scene scene(painting, args.frame);
+  bar.Update("patches", 0.45);
+  const synth::SyntheticPatchScan scan = synth::SimulatePatchScan(scene, g);
+  bar.Update("writing", 0.8);
+  Status written =
+      WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        return synth::WriteSyntheticPatchScan(dir, painting, scan);
+      });
+  bar.Finish();
+  if (!written.ok()) return Fail(cmd, written.message());
+  std::printf(
+      "synthetic painting %.0f x %.0f mm, %dx%d texels; %dx%d patches of %dx%d samples, "
+      "%.0f x %.0f mm each, drift up to %.1f mm / %.1f deg -> %s/ (patches.json, "
+      "truth_patches.json)\n",
+      painting.width_mm, painting.height_mm, painting.truth.width(), painting.truth.height(),
+      columns, rows, scan.patches[0].scan.options.width_px, scan.patches[0].scan.options.height_px,
+      scan.field_mm.x(), scan.field_mm.y(), g.drift_mm, g.drift_deg, args.out.c_str());
+  return 0;
+}
 
 int RunSynth(SynthArgs args) {
   const std::string cmd = "synth";
@@ -46,6 +102,11 @@ int RunSynth(SynthArgs args) {
   if (args.scan_size.size() == 2) {
     args.scan.width_px = args.scan_size[0];
     args.scan.height_px = args.scan_size[1];
+  }
+  if (!args.patches.empty()) {
+    if (args.offset.size() == 2)
+      args.scan.offset_mm = Vec3d(args.offset[0], args.offset[1], args.scan.offset_mm.z());
+    return RunSynthPatches(args);
   }
   if (args.frame_sides.size() == 4) {
     args.frame.left_mm = args.frame_sides[0], args.frame.right_mm = args.frame_sides[1];
@@ -147,6 +208,7 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->group("Painting");
   c->add_option("--resolution", p.resolution_px, "Texels along the longer canvas side (64..8192)")
       ->capture_default_str()
+      ->each([args](const std::string&) { args->resolution_given = true; })
       ->group("Painting");
   c->add_option("--impasto-max-mm", p.impasto_max_mm, "Highest impasto (mm)")
       ->capture_default_str()
@@ -285,6 +347,30 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->needs(rti)
       ->group("RTI");
+  auto& g = args->grid;
+  CLI::Option* patches =
+      c->add_option("--patches", args->patches,
+                    "Scan the painting as COLUMNSxROWS overlapping patches (e.g. 3x2): "
+                    "patch_R_C.exr, patches.json (nominal rig poses, for `digitize preprocess "
+                    "--patches`), truth_patches.json (true poses); --scan-size WIDTH is per patch")
+          ->group("Patches");
+  c->add_option("--patch-overlap", g.overlap, "Share of a patch shared with its neighbour")
+      ->capture_default_str()
+      ->needs(patches)
+      ->group("Patches");
+  c->add_option("--drift-mm", g.drift_mm, "True pose off the nominal by up to this (mm)")
+      ->capture_default_str()
+      ->needs(patches)
+      ->group("Patches");
+  c->add_option("--drift-deg", g.drift_deg, "True pose tilted off the nominal by up to this (deg)")
+      ->capture_default_str()
+      ->needs(patches)
+      ->group("Patches");
+  c->add_option("--tilted-patch", args->tilted_patch,
+                "INDEX DEG: that patch (row-major) scanned with DEG more tilt")
+      ->expected(2)
+      ->needs(patches)
+      ->group("Patches");
   c->callback([args, &exit_code] { exit_code = RunSynth(*args); });
 }
 

@@ -107,6 +107,15 @@ struct ScanSimOptions {
   double outliers = 1e-4;  // share of samples displaced by +-(2..50) mm
   int exposures = 1;       // same pose, independent noise and dropouts
   uint64_t seed = 1;
+  // A patch of a larger painting (patch_sim.h): the canvas point aim_mm (canvas frame, on the
+  // plane Z = 0) takes the canvas centre's place in the pose (NaN: the canvas centre), and the
+  // field of view spans field_mm at distance_mm (square pixels, the tighter axis decides; 0: the
+  // footprint and field_margin as above). pose_error (canvas frame, applied to the canvas side
+  // of the pose: true canvas_from_scan = pose_error * nominal canvas_from_scan) moves the head
+  // away from the pose the options describe, without changing its camera.
+  Eigen::Vector2d aim_mm{kMissing, kMissing};
+  Eigen::Vector2d field_mm{0, 0};
+  RigidTransform pose_error;
   Status Validate() const;
 };
 

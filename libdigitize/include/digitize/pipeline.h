@@ -59,7 +59,11 @@ Result<PackSummary> PackFromFolders(const std::filesystem::path& canvas_dir,
 // `digitize preprocess`: scan(s) -> a canvas folder.
 struct PreprocessFolderOptions {
   std::vector<std::string> scans;  // exposures of one pose
-  ScanReadOptions read;            // mask and PLY grid included
+  // Or a patch list (ReadPatchList): overlapping scans of one painting, registered and merged
+  // (PreprocessPatches); then scans must be empty and read.mask unset.
+  std::string patches;
+  PatchRegistrationOptions registration;
+  ScanReadOptions read;  // mask and PLY grid included
   PreprocessOptions preprocess;
   std::string out;  // the canvas folder
 };

@@ -5,6 +5,7 @@
 
 #include <array>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "digitize/relief.h"
 #include "digitize/resample.h"
 #include "digitize/scan.h"
+#include "digitize/scan_registration.h"
 
 namespace digitize {
 
@@ -45,6 +47,9 @@ struct PreprocessResult {
   ResampleStats resample;
   std::vector<StepReport> steps;
   double total_seconds = 0;
+  // PreprocessPatches only: the registration (per patch, per overlap). canvas.canvas_from_scan
+  // is then canvas_from_RIG (the frame of the patch list's poses).
+  std::optional<PatchRegistrationResult> registration;
 };
 
 // Errors: invalid options, exposures that cannot be merged, no canvas found (messages name the
@@ -53,12 +58,37 @@ struct PreprocessResult {
 Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const PreprocessOptions& options,
                                     const ProgressCallback& progress = nullptr);
 
+// Several overlapping scans of one painting (patches, one pose each; scan_registration.h):
+// each sanitised, then registered and merged (RegisterPatches: canvas, resample and blend), then
+// relief and normals as Preprocess. Errors: those of RegisterPatches, naming the scan file.
+// options.merge is unused (no exposures to merge).
+Result<PreprocessResult> PreprocessPatches(std::vector<ScanPatch> patches,
+                                           const PreprocessOptions& options,
+                                           const PatchRegistrationOptions& registration,
+                                           const ProgressCallback& progress = nullptr);
+
+// A patch list (docs/formats.md, "patch list"): format "digitize.scan_patches", version 1, a
+// "patches" array of {"scan": path relative to the list's folder, "rig_from_scan": {"rotation",
+// "translation_mm"}}. Errors name the file and the key path; a rotation that is not one is an
+// error. The scan paths come back resolved against the list's folder.
+struct PatchListEntry {
+  std::filesystem::path scan;
+  RigidTransform rig_from_scan;
+};
+Result<std::vector<PatchListEntry>> ReadPatchList(const std::filesystem::path& path);
+
+// registration.json (docs/formats.md, "registration report"): per patch its registered pose and
+// correction, per overlap its residual. `sources` name the patches (the scan paths as given).
+std::string PatchRegistrationJson(const PatchRegistrationResult& registration,
+                                  const std::vector<std::string>& sources);
+
 // The report as JSON text (docs/formats.md, "preprocess report").
 std::string PreprocessReportJson(const PreprocessResult& result, const PreprocessOptions& options,
                                  const std::vector<std::string>& inputs);
 
 // Writes height.exr, mask.png, normals.exr, boxes.json, transform.json, report.json into dir
-// (created if needed), each atomically. Returns the first error.
+// (created if needed), each atomically, and registration.json for patches. Returns the first
+// error.
 Status WritePreprocessOutputs(const std::filesystem::path& dir, const PreprocessResult& result,
                               const PreprocessOptions& options,
                               const std::vector<std::string>& inputs);
