@@ -3,7 +3,7 @@
 # (docs/benchmarks.md, "Tiles"). Peak RSS is the kernel's (GNU time's %M: the process's maximum
 # resident set), so it counts everything: photos, canvas, tracer, OIIO's cache, the allocator.
 #   bench/tiles_bench.sh [SIZE ...]   texels along the canvas's longer side (default 1024 2048)
-# Env: BIN (the digitize executable, default build/bin/digitize), TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
+# Env: CACHE_MB (the tile jobs' image cache, default 256), BIN (the digitize executable, default build/bin/digitize), TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
 # new one under /tmp, removed after), CSV (default docs/bench_tiles.csv).
 # Each tile runs as its own process (`tiles run --index I`), as a Slurm array task would, so its
 # peak RSS is the job's. The merged maps are compared with the untiled fit's (idiff -fail 0).
@@ -14,6 +14,7 @@ bin=${BIN:-$root/build/bin/digitize}
 sizes=("$@")
 [ ${#sizes[@]} -gt 0 ] || sizes=(1024 2048)
 tile=${TILE:-512}
+cache=${CACHE_MB:-256}
 lights=${LIGHTS:-16}
 csv=${CSV:-$root/docs/bench_tiles.csv}
 own_work=0
@@ -42,9 +43,12 @@ for n in "${sizes[@]}"; do
     echo "$n,$texels,$lights,$1,$2,$mb,${4:-}" >> "$csv"
   }
   texels=0
-  read -r s kb < <(measure "$bin" synth -o "$d/synth" --resolution "$n" --photos --lights "$lights")
+  # The painting's 400 mm at n texels; the scan samples it 1.5 x as densely (frame and margin).
+  pitch=$(awk -v n="$n" 'BEGIN {print 400 / n}')
+  read -r s kb < <(measure "$bin" synth -o "$d/synth" --resolution "$n" --photos --lights "$lights" \
+                     --scan-size $((n * 3 / 2)) $((n * 9 / 8)))
   row synth "$s" "$kb"
-  read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas")
+  read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch")
   texels=$(oiiotool --info "$d/canvas/height.exr" |
              sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
   row preprocess "$s" "$kb"
@@ -59,7 +63,7 @@ for n in "${sizes[@]}"; do
           head -1 | awk '{print $3}') || true
   total=0 peak=0
   for ((i = 0; i < count; ++i)); do
-    read -r s kb < <(measure "$bin" tiles run "$d/plan.json" --index "$i")
+    read -r s kb < <(measure "$bin" tiles run "$d/plan.json" --index "$i" --cache-mb "$cache")
     total=$(awk -v a="$total" -v b="$s" 'BEGIN {print a + b}')
     [ "$kb" -gt "$peak" ] && peak=$kb
   done

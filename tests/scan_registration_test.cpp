@@ -34,8 +34,8 @@ namespace {
 // The target: no canvas point of a registered patch more than a quarter texel (of the
 // merged canvas, ~0.93 mm here) from where the true pose puts it. Measured 0.21 and 0.16 texel
 // in the two cases below (the in-plane rotation is what is left: ~0.05 deg over a patch's
-// 180 mm). Not yet robust: other seeds of the 2x2 case measured 0.17-0.45 texel (3 of 9 within
-// 0.25); the seeds here are the ones the work was tuned on.
+// 180 mm). The seeds here are the ones the work was tuned on; OtherSeedsStayWithinHalfATexel
+// says what holds on the others.
 constexpr double kMaxRegistrationErrorTexels = 0.25;
 // Scanner noise of the generator (ScanSimOptions::noise_mm, along the ray).
 constexpr double kNoiseMm = 0.02;
@@ -160,12 +160,13 @@ synth::SyntheticPatchScan Simulate(const Case& c, synth::Painting* painting_out 
   return scan;
 }
 
-void RunCase(const Case& c) {
+Measured RunCase(const Case& c, double max_error_texels = kMaxRegistrationErrorTexels) {
   SCOPED_TRACE(c.name);
   synth::Painting painting;
   const synth::SyntheticPatchScan scan = Simulate(c, &painting);
   Result<PatchRegistrationResult> r = RegisterPatches(Inputs(scan), {}, {}, {});
-  ASSERT_TRUE(r.ok()) << r.error().message;
+  EXPECT_TRUE(r.ok()) << r.error().message;
+  if (!r.ok()) return {};
   const Measured m = Measure(painting, scan, *r);
   std::printf("[%s] %s\n", c.name.c_str(), r->brief.c_str());
   for (const OverlapResidual& o : r->overlaps)
@@ -182,7 +183,7 @@ void RunCase(const Case& c) {
       "texels, single-patch RMS %.4f mm over %zu\n",
       c.name.c_str(), m.max_error_texels, r->field.pitch_mm, m.seam_rms_mm, m.seam_texels,
       m.single_rms_mm, m.single_texels);
-  EXPECT_LE(m.max_error_texels, kMaxRegistrationErrorTexels);
+  EXPECT_LE(m.max_error_texels, max_error_texels);
   EXPECT_GT(m.seam_texels, 1000u);
   EXPECT_LE(m.seam_rms_mm, kMaxSeamRmsMm);
   // Single-patch texels: the merge does not spoil what one patch measured.
@@ -193,10 +194,29 @@ void RunCase(const Case& c) {
     EXPECT_TRUE(std::isfinite(o.rms_mm) && std::isfinite(o.max_mm) && std::isfinite(o.mean_mm));
     EXPECT_GT(o.texels, 0u);
   }
-  for (float v : r->field.height_mm.data) ASSERT_TRUE(std::isfinite(v));
+  for (float v : r->field.height_mm.data) EXPECT_TRUE(std::isfinite(v));
+  return m;
 }
 
 TEST(ScanRegistration, Orthographic2x2) { RunCase(BaseCase()); }
+
+// The same case under other drifts and noise (the grid's seed): what the registration holds on
+// cases it was not tuned on. Measured 0.08-0.35 texel over seeds 1-9, 7 of them within the
+// issue's quarter texel, seam RMS 0.012-0.017 mm: every seed within half a texel and the seam
+// bound, at least 6 of 9 within a quarter (one of slack for another compiler's rounding).
+TEST(ScanRegistration, OtherSeedsStayWithinHalfATexel) {
+  constexpr double kUntunedMaxErrorTexels = 0.5;
+  int within_quarter = 0;
+  for (uint64_t seed = 1; seed <= 9; ++seed) {
+    Case c = BaseCase();
+    c.grid.seed = seed;
+    c.name = "ortho 2x2, grid seed " + std::to_string(seed);
+    const Measured m = RunCase(c, kUntunedMaxErrorTexels);
+    within_quarter += m.max_error_texels <= kMaxRegistrationErrorTexels;
+  }
+  std::printf("%d of 9 seeds within a quarter texel\n", within_quarter);
+  EXPECT_GE(within_quarter, 6);
+}
 
 TEST(ScanRegistration, PinholeBowed3x2WithATiltedPatch) {
   Case c = BaseCase();

@@ -111,6 +111,10 @@ void AddRun(CLI::App* tiles, int& exit_code) {
   CLI::Option* all = c->add_flag("--all", args->all, "Every tile not done yet");
   index->excludes(all);
   c->add_flag("--redo", args->run.redo, "Fit tiles that are done again");
+  c->add_option("--cache-mb", args->run.cache_mb,
+                "Memory bound of the image cache the canvas windows and photo parts are read "
+                "through (MB, >= 64)")
+      ->capture_default_str();
   c->add_option("--threads", args->run.threads, "Worker threads (0 = all cores)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
