@@ -9,7 +9,6 @@
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <set>
 
 #include "digitize/image_io.h"
@@ -330,19 +329,14 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
                              const RigidTransform& canvas_from_scan, const PhotoSet& photos,
                              const ReflectanceFitOptions& options,
                              std::span<const TexelRect> regions, const RegionFitted& done,
-                             const ProgressCallback& progress,
-                             const SharedFitInputs& shared_inputs) {
+                             const ProgressCallback& progress, const PhotoSet* whole_set) {
   auto start = Clock::now();
   if (Status s = options.Validate(); !s.ok()) return Error{"fit options: " + s.message()};
   ReportProgress(progress, "fit", 0.0);
   auto t0 = Clock::now();
-  std::optional<HeightFieldTracer> built;
-  if (!shared_inputs.tracer) {
-    auto tracer = HeightFieldTracer::Build(canvas);
-    if (!tracer.ok()) return Error{"canvas: " + tracer.error().message};
-    built = std::move(tracer).value();
-  }
-  const HeightFieldTracer& tracer = shared_inputs.tracer ? *shared_inputs.tracer : *built;
+  auto built = HeightFieldTracer::Build(canvas);
+  if (!built.ok()) return Error{"canvas: " + built.error().message};
+  const HeightFieldTracer& tracer = *built;
   size_t all_texels = 0;
   for (size_t r = 0; r < regions.size(); ++r) {
     const TexelRect& g = regions[r];
@@ -359,9 +353,9 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
   shared.seconds_tracer = Since(t0);
 
   SampleScene scene{&canvas, &normals, canvas_from_scan, &photos, &tracer};
-  const PhotoSet& whole_set = shared_inputs.whole_set ? *shared_inputs.whole_set : photos;
-  if (shared_inputs.whole_set) {
-    if (Status s = CheckCamerasSeeCanvas(whole_set, canvas_from_scan, canvas); !s.ok())
+  const PhotoSet& set = whole_set ? *whole_set : photos;
+  if (whole_set) {
+    if (Status s = CheckCamerasSeeCanvas(set, canvas_from_scan, canvas); !s.ok())
       return Error{s.message()};
     scene.cameras_checked = true;
   }
@@ -373,12 +367,12 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
     scene.pixel_texels = &pixel_maps;
     shared.seconds_samples += Since(t0);
   }
-  CountPhotoDirections(whole_set, canvas, canvas_from_scan, shared);
+  CountPhotoDirections(set, canvas, canvas_from_scan, shared);
   const int needed = std::max(options.fit.min_samples, kMinDistinctPhotoDirections);
   if (shared.distinct_directions < needed) {
     const int n = shared.distinct_directions;
     const size_t below = shared.light_below_canvas.size();
-    return Error{whole_set.source.string() + ": only " + std::to_string(n) +
+    return Error{set.source.string() + ": only " + std::to_string(n) +
                  " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
                  " with the light above the canvas, in " + std::to_string(shared.photos) +
                  (shared.photos == 1 ? " photo" : " photos") +

@@ -131,6 +131,23 @@ FootprintPixels Footprint(int w, int h, const Eigen::Vector2d& px, const Eigen::
   return f;
 }
 
+// Whether a photo's sample is unusable (non-finite, saturated, black), counted in `stats`.
+bool RejectPixel(const PixelSample& pixel, const SampleOptions& options, SampleStats& stats) {
+  if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
+    ++stats.non_finite;
+    return true;
+  }
+  if (pixel.flags & kPixelSaturated) {
+    ++stats.saturated;
+    return true;
+  }
+  if (options.reject_black && pixel.rgb.maxCoeff() <= options.black_level) {
+    ++stats.black;
+    return true;
+  }
+  return false;
+}
+
 // One photo's sample over the pixels of `f`.
 PixelSample Average(const Photo& photo, const FootprintPixels& f,
                     const std::vector<uint32_t>& pixels) {
@@ -302,18 +319,7 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
           continue;
         }
         const PixelSample pixel = Average(photo, vt.footprint, chunk_pixels[t / kChunk]);
-        if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
-          ++local.non_finite;
-          continue;
-        }
-        if (pixel.flags & kPixelSaturated) {
-          ++local.saturated;
-          continue;
-        }
-        if (options.reject_black && pixel.rgb.maxCoeff() <= options.black_level) {
-          ++local.black;
-          continue;
-        }
+        if (RejectPixel(pixel, options, local)) continue;
         if (vt.hidden) {
           ++local.hidden;
           continue;
@@ -585,18 +591,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       const PixelSample pixel = Average(
           photo, Footprint(camera.width, camera.height, px, jacobian, owner, texels[t], pixel_list),
           pixel_list);
-      if ((pixel.flags & kPixelNonFinite) || !IsValid(pixel.rgb)) {
-        ++local.non_finite;
-        continue;
-      }
-      if (pixel.flags & kPixelSaturated) {
-        ++local.saturated;
-        continue;
-      }
-      if (options.reject_black && pixel.rgb.maxCoeff() <= options.black_level) {
-        ++local.black;
-        continue;
-      }
+      if (RejectPixel(pixel, options, local)) continue;
       BrdfSample& s = slots[i * n_texels + t];
       s.view_dir = v_local.cast<float>();
       s.light_dir = l_local.cast<float>();

@@ -267,12 +267,13 @@ double MinSinElevation(const PhotoSet& set, const RigidTransform& canvas_from_sc
   const RigidTransform scan_from_canvas = canvas_from_scan.Inverse();
   double least = 1.0;
   for (const Photo& photo : set.photos) {
+    // A perspective camera's rays start at its centre; an orthographic one's share a direction.
+    Vec3d o, d;
+    photo.camera.Ray(photo.camera.cx - photo.camera.origin_x,
+                     photo.camera.cy - photo.camera.origin_y, o, d);
     for (int i = 0; i < 4; ++i) {  // the bottom corners
       const Vec3d p_scan = scan_from_canvas.Apply(box[i]);
       const Vec3d to_light = canvas_from_scan.rotation * photo.light.DirectionTo(p_scan);
-      Vec3d o, d;
-      photo.camera.Ray(photo.camera.cx - photo.camera.origin_x,
-                       photo.camera.cy - photo.camera.origin_y, o, d);
       const Vec3d to_camera = photo.camera.model == CameraModel::kOrthographic
                                   ? Vec3d(canvas_from_scan.rotation * -d)
                                   : Vec3d(canvas_from_scan.rotation * (o - p_scan).normalized());
@@ -413,7 +414,6 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
     auto in = ReadTileInputs(plan, index, *photos, frame->canvas_from_scan, frame->field.pitch_mm,
                              reader);
     if (!in.ok()) return Error{"tile " + std::to_string(index) + ": " + in.error().message};
-    const SharedFitInputs shared{nullptr, &*photos};
     const Status fitted = FitReflectanceRegions(
         in->canvas.field, in->canvas.normals, in->canvas.canvas_from_scan, in->photos, fit,
         std::span<const TexelRect>(&in->region, 1),
@@ -437,7 +437,7 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
                         result.report.Brief());
           return Status::Ok();
         },
-        nullptr, shared);
+        nullptr, &*photos);
     if (!fitted.ok())
       return Error{plan.file.string() + ": tile " + std::to_string(index) + ": " +
                    fitted.message()};

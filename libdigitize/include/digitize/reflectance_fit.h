@@ -35,7 +35,6 @@
 #include "digitize/brdf_fit.h"
 #include "digitize/core.h"
 #include "digitize/height_field.h"
-#include "digitize/height_field_tracer.h"
 #include "digitize/photo_set.h"
 #include "digitize/reflectance_maps.h"
 #include "digitize/reflectance_samples.h"
@@ -142,23 +141,17 @@ struct TexelRect {
 // the region's maps (the region's size) and its report (its samples, texels and times; the
 // photo-set fields as the whole fit's) before the next region starts -- so a caller that writes
 // each one out can be killed and resume. A `done` error stops the run and is returned. Errors as
-// FitReflectance; a region not inside the canvas or empty.
+// FitReflectance; a region not inside the canvas or empty. `whole_set`: when `photos` are parts
+// of photos (LoadPhotoRegion, a tile at a time), the set they were cut from (headers only): the
+// set-wide checks and counts (cameras against the canvas, distinct directions, lights below the
+// canvas) are of it, as the whole canvas's fit makes them. Null: of `photos`.
 using RegionFitted = std::function<Status(size_t region, ReflectanceFitResult&& result)>;
-// What a caller that fits a canvas in several calls -- a tile at a time, each with the parts of
-// the photos that tile needs (LoadPhotoRegion) -- shares between the calls.
-struct SharedFitInputs {
-  const HeightFieldTracer* tracer = nullptr;  // built from the canvas; null: built by the call
-  // The photos the parts were cut from (headers only): the set-wide checks and counts (cameras
-  // against the canvas, distinct directions, lights below the canvas) are of these, as the
-  // whole canvas's fit would make them. Null: of `photos`.
-  const PhotoSet* whole_set = nullptr;
-};
 Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& normals,
                              const RigidTransform& canvas_from_scan, const PhotoSet& photos,
                              const ReflectanceFitOptions& options,
                              std::span<const TexelRect> regions, const RegionFitted& done,
                              const ProgressCallback& progress = nullptr,
-                             const SharedFitInputs& shared_inputs = {});
+                             const PhotoSet* whole_set = nullptr);
 
 // The report as JSON text (docs/formats.md, "fit report").
 std::string ReflectanceReportJson(const ReflectanceFitResult& result,
