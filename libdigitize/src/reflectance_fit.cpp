@@ -372,10 +372,9 @@ Status FitReflectanceRegions(const HeightField& canvas, const Grid<Vec3f>& norma
   if (shared.distinct_directions < needed) {
     const int n = shared.distinct_directions;
     const size_t below = shared.light_below_canvas.size();
-    return Error{set.source.string() + ": only " + std::to_string(n) +
-                 " distinct (light, view) " + (n == 1 ? "pair" : "pairs") +
-                 " with the light above the canvas, in " + std::to_string(shared.photos) +
-                 (shared.photos == 1 ? " photo" : " photos") +
+    return Error{set.source.string() + ": only " + std::to_string(n) + " distinct (light, view) " +
+                 (n == 1 ? "pair" : "pairs") + " with the light above the canvas, in " +
+                 std::to_string(shared.photos) + (shared.photos == 1 ? " photo" : " photos") +
                  (below ? " (" + std::to_string(below) + " lit from at or below the canvas)" : "") +
                  "; the fit needs at least " + std::to_string(needed) + " (min_samples " +
                  std::to_string(options.fit.min_samples) +
