@@ -417,6 +417,11 @@ Status IcpStep(std::vector<Patch>& patches, int moving, const std::vector<int>& 
     p.report.last_icp_move_mm = move;
     if (move <= options.converged_mm) return Status::Ok();
   }
+  // Point-to-plane steps on a nearly flat overlap can keep swapping correspondences along its
+  // weakly held direction: the last rounds then wobble by a few converged_mm (0.08 mm measured on
+  // an AVX-512 machine where OpenCV's kd-tree picks other neighbours). The polish below refines
+  // from there and must converge itself; only an ICP still travelling is an error here.
+  if (move <= 10 * options.converged_mm) return Status::Ok();
   return Error{p.name() + ": ICP did not converge in " + std::to_string(options.max_icp_rounds) +
                " rounds (the last moved the patch by " + Format("%.4f", move) +
                " mm, converged_mm " + Format("%.4f", options.converged_mm) + ")"};

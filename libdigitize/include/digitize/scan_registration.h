@@ -48,8 +48,9 @@
 //
 // Errors (naming the scan files): fewer than two patches, a patch whose canvas is not found, a
 // patch that overlaps no other by min_overlap_mm2, an overlap with no relief to correlate
-// (featureless: every piece's correlation peak below min_correlation_peak), ICP or the polish
-// not converging in max_icp_rounds / polish_iterations, a correction larger than max_correction_mm,
+// (featureless: every piece's correlation peak below min_correlation_peak), ICP still moving the
+// patch by more than 10 converged_mm after max_icp_rounds, the polish not converging in
+// polish_iterations, a correction larger than max_correction_mm,
 // an overlap whose RMS residual exceeds max_overlap_rms_mm. Never returns NaN/Inf.
 #pragma once
 
