@@ -76,12 +76,13 @@ set(DIGITIZE_SAMPLES_SOURCES
   photo_residuals.cpp  # OpenCV (phase correlation): per-photo gain and misregistration
 )
 
-set(DIGITIZE_PACK_HEADERS pack.h pack_pyramid.h provenance.h)
+set(DIGITIZE_PACK_HEADERS pack.h pack_pyramid.h pack_tiled.h provenance.h)
 set(DIGITIZE_PACK_SOURCES
   pack.cpp         # the model, its validation and encodings
   pack_write.cpp   # OpenImageIO: WritePack (multi-part OpenEXR)
   pack_pyramid.cpp # the 2 x 2 prefilter of a coarser level (Toksvig)
-  pack_read.cpp    # OpenImageIO: the bounded reader (header pre-scan, ReadPack, InspectPack)
+  pack_tiled.cpp   # OpenEXR: WriteTiledPack (version 3: tiled, mip-mapped, streamed by bands)
+  pack_read.cpp    # OpenImageIO: the bounded reader (header pre-scan, ReadPack, InspectPack, tiles)
   pack_verify.cpp  # VerifyPack (SHA-1 of the pixels)
   provenance.cpp   # where a pack came from, and its JSON form
 )

@@ -233,6 +233,38 @@ TEST_F(CliTest, PackRunInspectVerify) {
   Output verify = RunCli("verify " + Path("p.pack.exr"));
   EXPECT_EQ(verify.exit_code, 0) << verify.text;
   EXPECT_NE(verify.text.find("valid"), std::string::npos) << verify.text;
+
+  // The tiled, multi-resolution pack (version 3): the same level 0, its levels listed, every
+  // tile verified; a tile size outside the format is refused before anything is written.
+  Output tiled = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                        Path("t.pack.exr") + " --pack-tile-size 64");
+  ASSERT_EQ(tiled.exit_code, 0) << tiled.text;
+  const auto jt = InspectJson(Path("t.pack.exr"));
+  EXPECT_EQ(jt.value("version", 0), 3);
+  EXPECT_EQ(jt.value("tile_size", 0), 64);
+  size_t levels = 1, tiles = 0;
+  for (int w = jt["size_texels"][0], h = jt["size_texels"][1]; w > 1 || h > 1; ++levels) {
+    w = (w + 1) / 2;  // ceil(w / 2) a level
+    h = (h + 1) / 2;
+  }
+  ASSERT_EQ(jt["levels"].size(), levels);
+  for (const auto& l : jt["levels"]) tiles += ((int(l[0]) + 63) / 64) * ((int(l[1]) + 63) / 64);
+  EXPECT_EQ(jt["provenance"]["options"]["pack"].value("tile_size", 0), 64);
+  Output vt = RunCli("verify " + Path("t.pack.exr"));
+  EXPECT_EQ(vt.exit_code, 0) << vt.text;
+  EXPECT_NE(vt.text.find("ok  tiles: " + std::to_string(tiles) + " tiles of 64 texels over " +
+                         std::to_string(levels) + " levels"),
+            std::string::npos)
+      << vt.text;
+  Output it = RunCli("inspect " + Path("t.pack.exr"));
+  EXPECT_NE(it.text.find("tiles       64 x 64 texels, " + std::to_string(levels) + " levels"),
+            std::string::npos)
+      << it.text;
+  Output bad = RunCli("pack --canvas " + Path("c") + " --fit " + Path("f") + " --out " +
+                      Path("bad.pack.exr") + " --pack-tile-size 100");
+  EXPECT_EQ(bad.exit_code, 1) << bad.text;
+  EXPECT_NE(bad.text.find("power of two in [64, 4096]"), std::string::npos) << bad.text;
+  EXPECT_FALSE(fs::exists(Path("bad.pack.exr")));
   // Every check `verify --help` promises is listed as done.
   Output verify_help = RunCli("verify --help");
   for (const char* check : {"header", "checksum", "boxes"}) {

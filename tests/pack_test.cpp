@@ -14,10 +14,12 @@
 #include <nlohmann/json.hpp>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "digitize/image_io.h"
 #include "digitize/normals.h"
+#include "digitize/pack_tiled.h"
 #include "digitize/relief.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
@@ -827,6 +829,265 @@ TEST(Pack, UnknownOrInvalidModelsAreRefused) {
     EXPECT_EQ(s.error().message.rfind(forged.string() + ": ", 0), 0u) << s.error().message;
     EXPECT_NE(s.error().message.find("digitize:models"), std::string::npos) << s.error().message;
   }
+  fs::remove_all(dir);
+}
+
+// --- version 3: tiled, multi-resolution packs (pack_tiled.h) ---------------------------------
+
+// A pack of the encoded values of a level (what a tiled pack of `options` stores at that level).
+Pack EncodedLevel(const PackLevel& level, const Pack& like, const PackWriteOptions& options) {
+  Pack p;
+  p.field = level.field;
+  p.normals = level.normals;
+  p.maps = level.maps;
+  p.delta0_mm = like.delta0_mm;
+  p.max_height_mm = like.max_height_mm;
+  p.cell_px = like.cell_px;
+  return EncodePackValues(p, options);
+}
+
+// Level 0 of a tiled pack holds exactly the single-grid pack's values (bit for bit, half and
+// quantised), on a size that is no multiple of the tile (300 x 170 in 64-texel tiles: clipped
+// tiles on two sides), with GGX and Lafortune texels and relief boxes.
+TEST(TiledPack, LevelZeroIsTheSingleGridPack) {
+  const fs::path dir = TempDir("tiled_level0");
+  const Pack p = MakeGgxTestPack(300, 170, 21);
+  ASSERT_FALSE(p.boxes.empty());
+  for (PackEncoding e : {PackEncoding::kHalf, PackEncoding::kQuantised}) {
+    PackWriteOptions o;
+    o.encoding = e;
+    o.tile_size = 64;
+    const fs::path file = dir / (std::string(ToString(e)) + ".pack.exr");
+    ASSERT_OK(WritePack(file, p, o));
+    auto s = InspectPack(file);
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    EXPECT_EQ(s->version, kTiledPackVersion);
+    EXPECT_EQ(s->tile_size, 64);
+    ASSERT_EQ(s->levels.size(), 10u);  // 300 x 170 ... 2 x 1, 1 x 1
+    EXPECT_EQ(s->levels[1][0], 150);
+    EXPECT_EQ(s->levels[2][1], 43);
+    EXPECT_EQ(s->levels.back()[0], 1);
+    EXPECT_EQ(s->texels_by_model, HeaderOf(p).texels_by_model);
+    auto r = ReadPack(file);
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    ExpectIdentical(EncodePackValues(p, o), *r);
+    auto v = VerifyPack(file);
+    EXPECT_TRUE(v.ok()) << v.error().message;
+  }
+  fs::remove_all(dir);
+}
+
+// Every level's tiles hold the prefilter (pack_pyramid.h) of the whole level above, encoded:
+// the writer filters bands of 2 x tile_size rows, and this asserts the bands change nothing --
+// texel for texel, bit for bit, on every level down to 1 x 1 (a 96-texel-wide band pair at level
+// 0 leaves odd rows and columns at several levels).
+TEST(TiledPack, EveryLevelIsThePrefilterOfTheWholeLevelAbove) {
+  const fs::path dir = TempDir("tiled_levels");
+  const Pack p = MakeGgxTestPack(333, 201, 22);
+  PackWriteOptions o;
+  o.tile_size = 64;
+  ASSERT_OK(WritePack(dir / "p.pack.exr", p, o));
+  auto reader = TiledPackReader::Open(dir / "p.pack.exr");
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  const PackSummary& s = (*reader)->summary();
+  PackLevel level = BaseLevel(p.field, p.normals, p.maps);
+  int64_t compared = 0;
+  for (size_t l = 0; l < s.levels.size(); ++l) {
+    if (l > 0) level = PrefilterLevel(level);
+    ASSERT_EQ(level.field.width(), s.levels[l][0]);
+    ASSERT_EQ(level.field.height(), s.levels[l][1]);
+    const Pack want = EncodedLevel(level, p, o);
+    for (int ty = 0; ty * 64 < want.height(); ++ty)
+      for (int tx = 0; tx * 64 < want.width(); ++tx) {
+        auto tile = (*reader)->ReadTile(static_cast<int>(l), tx, ty);
+        ASSERT_TRUE(tile.ok()) << tile.error().message;
+        const PackLevel& t = tile->texels;
+        EXPECT_DOUBLE_EQ(t.field.pitch_mm, p.field.pitch_mm * std::ldexp(1.0, int(l)));
+        for (int y = 0; y < t.field.height(); ++y)
+          for (int x = 0; x < t.field.width(); ++x) {
+            const int X = tile->x0 + x, Y = tile->y0 + y;
+            ASSERT_EQ(t.field.height_mm(x, y), want.field.height_mm(X, Y))
+                << l << ": " << X << "," << Y;
+            ASSERT_EQ(t.field.state(x, y), want.field.state(X, Y));
+            ASSERT_EQ(t.normals(x, y), want.normals(X, Y));
+            ASSERT_EQ(t.maps.rho_d(x, y), want.maps.rho_d(X, Y));
+            ASSERT_EQ(t.maps.rho_s(x, y), want.maps.rho_s(X, Y));
+            ASSERT_EQ(t.maps.lobe(x, y), want.maps.lobe(X, Y));
+            ASSERT_EQ(t.maps.model(x, y), want.maps.model(X, Y));
+            ASSERT_EQ(t.maps.status(x, y), want.maps.status(X, Y));
+            ++compared;
+          }
+      }
+  }
+  // Level 0 and everything below it (about a third more): each texel once.
+  EXPECT_GT(compared, 333 * 201 * 4 / 3 - 10);
+  fs::remove_all(dir);
+}
+
+// Tiles read from two threads at once are the tiles read one by one.
+TEST(TiledPack, TilesReadFromTwoThreadsAreTheSame) {
+  const fs::path dir = TempDir("tiled_threads");
+  PackWriteOptions o;
+  o.tile_size = 64;
+  ASSERT_OK(WritePack(dir / "p.pack.exr", MakeTestPack(256, 192, 23), o));
+  auto reader = TiledPackReader::Open(dir / "p.pack.exr");
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  std::vector<float> one, two[2];
+  for (int ty = 0; ty < 3; ++ty)
+    for (int tx = 0; tx < 4; ++tx)
+      one.push_back((*reader)->ReadTile(0, tx, ty)->texels.field.height_mm(5, 7));
+  std::vector<std::thread> threads;
+  for (int k = 0; k < 2; ++k)
+    threads.emplace_back([&, k] {
+      for (int ty = 0; ty < 3; ++ty)
+        for (int tx = 0; tx < 4; ++tx) {
+          auto t = (*reader)->ReadTile(0, tx, ty);
+          two[k].push_back(t.ok() ? t->texels.field.height_mm(5, 7) : -1.0f);
+        }
+    });
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(one, two[0]);
+  EXPECT_EQ(one, two[1]);
+  auto bad = (*reader)->ReadTile(0, 4, 0);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message.find("no tile 4, 0"), std::string::npos) << bad.error().message;
+  EXPECT_FALSE((*reader)->ReadTile(9, 0, 0).ok());
+  EXPECT_FALSE((*reader)->ReadTile(-1, 0, 0).ok());
+  fs::remove_all(dir);
+}
+
+// The writer asks for level 0 a band of tile_size rows at a time, top to bottom; a band source
+// that fails mid-way fails the write with its own message and leaves the old file as it was.
+TEST(TiledPack, StreamsBandsAndAFailedWriteLeavesTheOldFile) {
+  const fs::path dir = TempDir("tiled_bands");
+  const Pack p = MakeTestPack(200, 150, 24);
+  PackWriteOptions o;
+  o.tile_size = 64;
+  std::vector<std::pair<int, int>> asked;
+  ASSERT_OK(WriteTiledPack(dir / "p.pack.exr", HeaderOf(p), o,
+                           [&](int y0, int rows) -> Result<PackLevel> {
+                             asked.emplace_back(y0, rows);
+                             return PackRows(p, y0, rows);
+                           }));
+  const std::vector<std::pair<int, int>> want = {{0, 64}, {64, 64}, {128, 22}};
+  EXPECT_EQ(asked, want);
+  auto r = ReadPack(dir / "p.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  const auto before = ReadBytes(dir / "p.pack.exr");
+  Status s = WriteTiledPack(dir / "p.pack.exr", HeaderOf(p), o,
+                            [&](int y0, int rows) -> Result<PackLevel> {
+                              if (y0 >= 64) return Error{"tile folder 3: gone"};
+                              return PackRows(p, y0, rows);
+                            });
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("tile folder 3: gone"), std::string::npos) << s.message();
+  EXPECT_EQ(ReadBytes(dir / "p.pack.exr"), before);
+  // A band of the wrong size, and texels whose models disagree with the header's counts.
+  s = WriteTiledPack(dir / "p.pack.exr", HeaderOf(p), o,
+                     [&](int y0, int rows) -> Result<PackLevel> {
+                       return PackRows(p, y0, std::max(1, rows - 1));
+                     });
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("rows 0..63: the band is 200x63"), std::string::npos) << s.message();
+  PackHeader lying = HeaderOf(p);
+  lying.texels_by_model[0] -= 1;
+  lying.texels_by_model[1] += 1;
+  s = WriteTiledPack(dir / "p.pack.exr", lying, o,
+                     [&](int y0, int rows) -> Result<PackLevel> { return PackRows(p, y0, rows); });
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("the header said"), std::string::npos) << s.message();
+  // A NaN in the last band is refused, named in level 0's rows.
+  Pack nan = p;
+  nan.maps.rho_d(7, 140) = Vec3f(std::nanf(""), 0, 0);
+  s = WriteTiledPack(
+      dir / "p.pack.exr", HeaderOf(nan), o,
+      [&](int y0, int rows) -> Result<PackLevel> { return PackRows(nan, y0, rows); });
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("level 0, rows 128..149"), std::string::npos) << s.message();
+  EXPECT_EQ(ReadBytes(dir / "p.pack.exr"), before);
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()),
+            1);  // no temporary
+  fs::remove_all(dir);
+}
+
+TEST(TiledPack, TileSizesOutsideTheFormatAreRefused) {
+  const fs::path dir = TempDir("tiled_sizes");
+  const Pack p = MakeTestPack(40, 30, 25);
+  for (int t : {1, 32, 100, 8192}) {
+    PackWriteOptions o;
+    o.tile_size = t;
+    const Status s = WritePack(dir / "p.pack.exr", p, o);
+    ASSERT_FALSE(s.ok()) << t;
+    EXPECT_NE(s.message().find("power of two in [64, 4096]"), std::string::npos) << s.message();
+  }
+  EXPECT_FALSE(fs::exists(dir / "p.pack.exr"));
+  // A pack smaller than one tile: one tile a level.
+  PackWriteOptions o;
+  o.tile_size = 64;
+  ASSERT_OK(WritePack(dir / "p.pack.exr", p, o));
+  auto r = ReadPack(dir / "p.pack.exr");
+  ASSERT_TRUE(r.ok()) << r.error().message;
+  ExpectIdentical(EncodePackValues(p, {}), *r);
+  fs::remove_all(dir);
+}
+
+// The tile description is untrusted: a forged 1 x 1 tile (OpenEXR would size its offset tables by
+// it), a mode other than mip-mapped, a tiled pack claiming version 2 and a flipped bit in the
+// pixel data of any tile are refused, naming the file.
+TEST(TiledPack, ForgedOrCorruptTiledPacksAreRefused) {
+  const fs::path dir = TempDir("tiled_forged");
+  const Pack p = MakeTestPack(130, 70, 26);
+  PackWriteOptions o;
+  o.tile_size = 64;
+  ASSERT_OK(WritePack(dir / "p.pack.exr", p, o));
+  const auto bytes = ReadBytes(dir / "p.pack.exr");
+  const std::string tiles = std::string("tiles") + '\0' + "tiledesc" + '\0' +
+                            std::string("\x09\x00\x00\x00", 4) +
+                            std::string("\x40\x00\x00\x00\x40\x00\x00\x00\x11", 9);
+  auto forge = [&](const std::string& from, const std::string& to, const std::string& name) {
+    auto b = bytes;
+    EXPECT_TRUE(Patch(b, from, to)) << name;
+    WriteBytes(dir / name, b);
+    auto r = ReadPack(dir / name);
+    EXPECT_FALSE(r.ok()) << name;
+    EXPECT_FALSE(TiledPackReader::Open(dir / name).ok()) << name;
+    return r.ok() ? std::string() : r.error().message;
+  };
+  std::string m = forge(
+      tiles,
+      tiles.substr(0, tiles.size() - 9) + std::string("\x01\x00\x00\x00\x01\x00\x00\x00\x11", 9),
+      "one.pack.exr");
+  EXPECT_NE(m.find("one.pack.exr: part 0 has 1 x 1 tiles"), std::string::npos) << m;
+  m = forge(tiles, tiles.substr(0, tiles.size() - 1) + std::string(1, '\0'), "mode.pack.exr");
+  EXPECT_NE(m.find("tile mode 0"), std::string::npos) << m;
+  const std::string version = std::string("digitize:version") + '\0' + "string" + '\0' +
+                              std::string("\x01\x00\x00\x00", 4) + "3";
+  m = forge(version, version.substr(0, version.size() - 1) + "2", "v2.pack.exr");
+  EXPECT_NE(m.find("4 parts; a version 2 pack has 3"), std::string::npos) << m;
+  // Bit flips past the headers (tiles' data, the offset tables, the checksums part): verify reads
+  // every tile of every level and refuses them; ReadPack reads level 0 alone, and returns its
+  // values or an error.
+  const size_t headers = bytes.size() / 8;  // the headers take well under an eighth here
+  std::mt19937 rng(27);
+  int refused = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    auto b = bytes;
+    const size_t at = headers + rng() % (b.size() - headers);
+    b[at] = static_cast<char>(b[at] ^ (1 << (rng() % 8)));
+    WriteBytes(dir / "f.pack.exr", b);
+    auto v = VerifyPack(dir / "f.pack.exr");
+    if (!v.ok()) {
+      ++refused;
+      EXPECT_NE(v.error().message.find("f.pack.exr"), std::string::npos) << v.error().message;
+    }
+    auto r = ReadPack(dir / "f.pack.exr");
+    if (r.ok()) {
+      SCOPED_TRACE("byte " + std::to_string(at));
+      ExpectIdentical(EncodePackValues(p, {}), *r);
+    }
+  }
+  EXPECT_GT(refused, 50);
   fs::remove_all(dir);
 }
 

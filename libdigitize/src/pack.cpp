@@ -93,27 +93,113 @@ Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, doub
   return Status::Ok();
 }
 
-// Integrity: EXR has no checksum, and a flipped bit in ZIP data can decode to other valid-looking
-// values. The writer hashes every digitize:* attribute (sorted by name, the checksum excluded)
-// and the decoded pixels of every part; the reader recomputes it.
-std::string PackChecksum(const OIIO::ImageSpec& meta, const void* const data[kParts],
-                         const size_t bytes[kParts]) {
-  std::vector<std::pair<std::string, std::string>> attrs;
-  for (const OIIO::ParamValue& p : meta.extra_attribs) {
-    const std::string name = p.name().string();
-    if (name.rfind("digitize:", 0) == 0 && name != "digitize:checksum")
-      attrs.emplace_back(name, meta.get_string_attribute(name));
-  }
-  std::sort(attrs.begin(), attrs.end());
+std::string PackChecksum(Attributes attributes, const void* const data[], const size_t bytes[],
+                         int parts) {
+  std::erase_if(attributes, [](const auto& a) { return a.first == "digitize:checksum"; });
+  std::sort(attributes.begin(), attributes.end());
   OIIO::SHA1 sha;
-  for (const auto& [k, v] : attrs) {
+  for (const auto& [k, v] : attributes) {
     sha.append(k);
     sha.append("=", 1);
     sha.append(v);
     sha.append("\n", 1);
   }
-  for (int p = 0; p < kParts; ++p) sha.append(data[p], bytes[p]);
+  for (int p = 0; p < parts; ++p) sha.append(data[p], bytes[p]);
   return sha.digest();
+}
+
+Attributes DigitizeAttributes(const OIIO::ImageSpec& spec) {
+  Attributes attributes;
+  for (const OIIO::ParamValue& p : spec.extra_attribs) {
+    const std::string name = p.name().string();
+    if (name.rfind("digitize:", 0) == 0)
+      attributes.emplace_back(name, spec.get_string_attribute(name));
+  }
+  return attributes;
+}
+
+Status CheckHeader(const PackHeader& header) {
+  const int w = header.width, h = header.height;
+  if (w <= 0 || h <= 0) return Error{"pack: empty grid"};
+  if (Status s = CheckPhysicalBounds(header.pitch_mm, w, h, header.delta0_mm, header.max_height_mm,
+                                     header.canvas_from_scan);
+      !s.ok())
+    return Error{"pack: " + s.message()};
+  const int cell_px = header.cell_px;
+  if (cell_px < 1) return Error{"pack: cell_px must be >= 1, got " + std::to_string(cell_px)};
+  const std::vector<ReliefBox>& boxes = header.boxes;
+  if (!boxes.empty() && !(header.delta0_mm > 0))
+    return Error{"pack: boxes need a bump plane above the canvas (delta0_mm > 0)"};
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    const ReliefBox& b = boxes[i];
+    const std::string name = "pack: box " + std::to_string(i);
+    if (b.x0 < 0 || b.y0 < 0 || b.width < 1 || b.height < 1 || b.x0 + int64_t{b.width} > w ||
+        b.y0 + int64_t{b.height} > h)
+      return Error{name + " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
+                   " grid"};
+    if (b.x0 % cell_px != 0 || b.y0 % cell_px != 0 || b.width != std::min(cell_px, w - b.x0) ||
+        b.height != std::min(cell_px, h - b.y0))
+      return Error{name + " is not a cell of the " + std::to_string(cell_px) + "-texel grid"};
+    if (b.u_max < b.x0 || b.u_max >= b.x0 + b.width || b.v_max < b.y0 || b.v_max >= b.y0 + b.height)
+      return Error{name + ": its highest texel (u_max, v_max) lies outside the box"};
+    if (!(b.h_max_mm >= -kMaxPackHeightMm) ||
+        b.h_max_mm > header.max_height_mm + 1e-6 * (1 + std::abs(header.max_height_mm)))
+      return Error{name + ": h_max_mm " + FormatNumber(b.h_max_mm) + " is not finite or above H"};
+    if (i > 0) {
+      const ReliefBox& a = boxes[i - 1];
+      if (std::make_pair(b.y0, b.x0) <= std::make_pair(a.y0, a.x0))
+        return Error{name + ": boxes must be distinct cells in row-major order"};
+    }
+  }
+  return Status::Ok();
+}
+
+Status CheckHalfRange(const Pack& pack, int y0) {
+  const int w = pack.width();
+  auto check = [&](const char* map, size_t i, float v) -> Status {
+    if (std::abs(v) > kHalfMax)
+      return Error{std::string(map) + " at texel " + TexelName(int(i % w), y0 + int(i / w)) +
+                   " = " + FormatNumber(v) + " exceeds the half-float range (65504)"};
+    return Status::Ok();
+  };
+  for (size_t i = 0; i < pack.field.height_mm.size(); ++i) {
+    Status s = check("height", i, pack.field.height_mm.data[i]);
+    for (int c = 0; c < 3 && s.ok(); ++c) s = check("rho_d", i, pack.maps.rho_d.data[i][c]);
+    for (int c = 0; c < 3 && s.ok(); ++c) s = check("rho_s", i, pack.maps.rho_s.data[i][c]);
+    for (int c : {0, 1, 3})
+      if (s.ok()) s = check("lobe", i, pack.maps.lobe.data[i][c]);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+std::vector<float> BoxCells(const std::vector<ReliefBox>& boxes, int w, int h, int cell_px) {
+  const int cells_x = (w + cell_px - 1) / cell_px, cells_y = (h + cell_px - 1) / cell_px;
+  std::vector<float> cells(static_cast<size_t>(cells_x) * cells_y * 4, 0.0f);
+  for (const ReliefBox& b : boxes) {
+    float* c = &cells[4 * (static_cast<size_t>(b.y0 / cell_px) * cells_x + b.x0 / cell_px)];
+    c[0] = 1.0f;
+    c[1] = b.h_max_mm;
+    c[2] = static_cast<float>(b.u_max - b.x0);
+    c[3] = static_cast<float>(b.v_max - b.y0);
+  }
+  return cells;
+}
+
+void EncodeTexel(const HeightField& field, const Grid<Vec3f>& normals, const ReflectanceMaps& maps,
+                 size_t i, uint16_t surface[4], uint16_t reflectance[9]) {
+  surface[0] = ToHalfBits(field.height_mm.data[i]);
+  surface[1] = ToHalfBits(normals.data[i].x());
+  surface[2] = ToHalfBits(normals.data[i].y());
+  surface[3] = ToHalfBits(
+      static_cast<float>(TexelCode(field.state.data[i], maps.status.data[i], maps.model.data[i])));
+  for (int c = 0; c < 3; ++c) {
+    reflectance[c] = ToHalfBits(maps.rho_d.data[i][c]);
+    reflectance[3 + c] = ToHalfBits(maps.rho_s.data[i][c]);
+  }
+  reflectance[6] = ToHalfBits(maps.lobe.data[i][0]);
+  reflectance[7] = ToHalfBits(maps.lobe.data[i][1]);
+  reflectance[8] = ToHalfBits(maps.lobe.data[i][3]);
 }
 
 }  // namespace pack_exr
@@ -154,7 +240,11 @@ Status PackQuantisation::Validate() const {
   return Status::Ok();
 }
 
-Status PackWriteOptions::Validate() const { return quantisation.Validate(); }
+Status PackWriteOptions::Validate() const {
+  if (tile_size != 0)
+    if (Status s = CheckPackTileSize(tile_size); !s.ok()) return s;
+  return quantisation.Validate();
+}
 
 nlohmann::json ToJson(const PackWriteOptions& o) {
   nlohmann::json j = {{"encoding", ToString(o.encoding)}};
@@ -163,19 +253,17 @@ nlohmann::json ToJson(const PackWriteOptions& o) {
                           {"normal", o.quantisation.normal_bits},
                           {"rho", o.quantisation.rho_bits},
                           {"lobe", o.quantisation.lobe_bits}};
+  if (o.tile_size > 0) j["tile_size"] = o.tile_size;
   return j;
 }
 
 Status Pack::Validate() const {
   const int w = width(), h = height();
   if (w <= 0 || h <= 0) return Error{"pack: empty grid"};
-  if (Status s =
-          CheckPhysicalBounds(field.pitch_mm, w, h, delta0_mm, max_height_mm, canvas_from_scan);
-      !s.ok())
-    return Error{"pack: " + s.message()};
   if (field.state.width != w || field.state.height != h || normals.width != w ||
       normals.height != h || maps.width() != w || maps.height() != h)
     return Error{"pack: the height field, normals and reflectance maps differ in size"};
+  if (Status s = CheckHeader(HeaderOf(*this)); !s.ok()) return s;
   if (Status s = maps.Validate(); !s.ok()) return Error{"pack: " + s.message()};
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -190,31 +278,23 @@ Status Pack::Validate() const {
         return Error{"pack: normal at texel " + TexelName(x, y) +
                      " is not a unit vector with nz >= 0"};
     }
-  if (cell_px < 1) return Error{"pack: cell_px must be >= 1, got " + std::to_string(cell_px)};
-  if (!boxes.empty() && !(delta0_mm > 0))
-    return Error{"pack: boxes need a bump plane above the canvas (delta0_mm > 0)"};
-  for (size_t i = 0; i < boxes.size(); ++i) {
-    const ReliefBox& b = boxes[i];
-    const std::string name = "pack: box " + std::to_string(i);
-    if (b.x0 < 0 || b.y0 < 0 || b.width < 1 || b.height < 1 || b.x0 + int64_t{b.width} > w ||
-        b.y0 + int64_t{b.height} > h)
-      return Error{name + " is not inside the " + std::to_string(w) + "x" + std::to_string(h) +
-                   " grid"};
-    if (b.x0 % cell_px != 0 || b.y0 % cell_px != 0 || b.width != std::min(cell_px, w - b.x0) ||
-        b.height != std::min(cell_px, h - b.y0))
-      return Error{name + " is not a cell of the " + std::to_string(cell_px) + "-texel grid"};
-    if (b.u_max < b.x0 || b.u_max >= b.x0 + b.width || b.v_max < b.y0 || b.v_max >= b.y0 + b.height)
-      return Error{name + ": its highest texel (u_max, v_max) lies outside the box"};
-    if (!(b.h_max_mm >= -kMaxPackHeightMm) ||
-        b.h_max_mm > max_height_mm + 1e-6 * (1 + std::abs(max_height_mm)))
-      return Error{name + ": h_max_mm " + FormatNumber(b.h_max_mm) + " is not finite or above H"};
-    if (i > 0) {
-      const ReliefBox& a = boxes[i - 1];
-      if (std::make_pair(b.y0, b.x0) <= std::make_pair(a.y0, a.x0))
-        return Error{name + ": boxes must be distinct cells in row-major order"};
-    }
-  }
   return Status::Ok();
+}
+
+PackHeader HeaderOf(const Pack& pack) {
+  PackHeader h;
+  h.width = pack.width();
+  h.height = pack.height();
+  h.pitch_mm = pack.field.pitch_mm;
+  h.delta0_mm = pack.delta0_mm;
+  h.max_height_mm = pack.max_height_mm;
+  h.cell_px = pack.cell_px;
+  h.boxes = pack.boxes;
+  h.canvas_from_scan = pack.canvas_from_scan;
+  h.provenance = pack.provenance;
+  if (pack.maps.model.size() == static_cast<size_t>(h.width) * h.height)
+    h.texels_by_model = CountModels(pack.maps);
+  return h;
 }
 
 Pack EncodePackValues(const Pack& pack, const PackWriteOptions& options) {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "digitize/pack.h"
+#include "digitize/pack_tiled.h"
 
 namespace digitize::pack_exr {
 
@@ -27,6 +28,15 @@ inline const std::vector<std::string> kReflectanceChannels = {"rho_d.R", "rho_d.
                                                               "lobe.cx", "lobe.cy", "lobe.k"};
 inline const std::vector<std::string> kBoxChannels = {"present", "h_max", "u_max", "v_max"};
 inline const char* const kPartNames[kParts] = {"surface", "reflectance", "boxes"};
+// Version 3 (pack_tiled.h): parts 0 and 1 tiled and mip-mapped, part 2 the boxes as above, and a
+// fourth part of SHA-1 digests, one row per tile (level by level, row-major) and a last row for
+// the boxes part: the digest's 20 bytes in order, 4 to a UINT channel (little-endian).
+inline constexpr int kTiledParts = 4;
+inline const char* const kChecksumPartName = "checksums";
+inline const std::vector<std::string> kChecksumChannels = {"sha1.0", "sha1.1", "sha1.2", "sha1.3",
+                                                           "sha1.4"};
+// OpenEXR's tile description mode byte for MIPMAP_LEVELS with ROUND_UP: level sizes ceil(w / 2^l).
+inline constexpr int kTileModeMipmapRoundUp = 0x11;
 
 // Part 0's M channel: state + 4 x fit status + kModelStride x model (version 2; version 1 has no
 // model term). The stride leaves room for 16 fit statuses; every code is an integer below 2048,
@@ -56,9 +66,38 @@ Status CheckPhysicalBounds(double pitch_mm, int w, int h, double delta0_mm, doub
 
 // Integrity: EXR has no checksum, and a flipped bit in ZIP data can decode to other valid-looking
 // values. The writer hashes every digitize:* attribute (sorted by name, the checksum excluded)
-// and the decoded pixels of every part; the reader recomputes it.
-std::string PackChecksum(const OIIO::ImageSpec& meta, const void* const data[kParts],
-                         const size_t bytes[kParts]);
+// and the decoded pixels of every part (version 3: none; each tile has its own digest); the
+// reader recomputes it.
+using Attributes = std::vector<std::pair<std::string, std::string>>;
+std::string PackChecksum(Attributes attributes, const void* const data[], const size_t bytes[],
+                         int parts);
+Attributes DigitizeAttributes(const OIIO::ImageSpec& spec);  // its digitize:* string attributes
+
+// Part 0's digitize:* attributes but the checksum, as both writers store them.
+Attributes PackAttributes(const PackHeader& header, const PackWriteOptions& options);
+
+// The header's bounds and boxes as Pack::Validate checks them ("pack: ..." messages).
+Status CheckHeader(const PackHeader& header);
+// Every value of `pack` within half's range (|v| <= 65504), else an error naming the map and the
+// texel (offset by y0 rows in the message).
+Status CheckHalfRange(const Pack& pack, int y0 = 0);
+
+// The boxes part: 4 floats (present, h_max, u_max, v_max) per cell, row-major.
+std::vector<float> BoxCells(const std::vector<ReliefBox>& boxes, int w, int h, int cell_px);
+// Its reading: every value checked (ReadPack's rules); errors name the file and the cell.
+Result<std::vector<ReliefBox>> DecodeBoxCells(const std::string& file, const float* cells, int w,
+                                              int h, int cell_px, size_t box_count);
+
+// One encoded texel (EncodePackValues' values) into the file's channels, canonical order: surface
+// H, NX, NY, M; reflectance rho_d.RGB, rho_s.RGB, lobe.cx, lobe.cy, lobe.k.
+void EncodeTexel(const HeightField& field, const Grid<Vec3f>& normals, const ReflectanceMaps& maps,
+                 size_t i, uint16_t surface[4], uint16_t reflectance[9]);
+// The inverse over a w x h block (canonical channel order) into out (grids sized w x h), each
+// texel checked as ReadPack checks it; messages name texel (x0 + x, y0 + y) and `where` (e.g.
+// " of level 2").
+Status DecodeTexels(const std::string& file, int version, const uint16_t* surface,
+                    const uint16_t* reflectance, int w, int h, int x0, int y0,
+                    const std::string& where, PackLevel& out);
 
 // digitize:provenance as JSON (provenance.cpp): what the writer stores and `inspect --json`
 // shows; and its parse, whose errors name the file and the key.

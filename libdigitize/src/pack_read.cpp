@@ -1,6 +1,7 @@
 // Texture packs: the bounded reader (pack.h: ReadPack, InspectPack), what tests/fuzz/fuzz_pack
 // targets. The raw headers are walked before OpenImageIO opens the file, so a forged header
 // cannot make it allocate what it claims.
+#include <OpenImageIO/hash.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -9,11 +10,13 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <system_error>
 
 #include "digitize/image_io.h"
 #include "digitize/pack.h"
+#include "digitize/pack_tiled.h"
 #include "exr_attribute_size.h"
 #include "json_fields.h"
 #include "options_json.h"
@@ -34,6 +37,7 @@ using namespace pack_exr;
 
 struct RawPart {
   int64_t width = 0, height = 0;
+  int tile_x = 0, tile_y = 0, tile_mode = -1;  // tiled parts: OpenEXR's tile description
 };
 
 // A part's channel list (OpenEXR "chlist": per channel a NUL-terminated name, int32 pixel type,
@@ -133,8 +137,9 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
       ++pos;
       break;
     }
-    if (parts.size() >= kParts)
-      return Error{name + ": more than " + std::to_string(kParts) + " parts; not a digitize pack"};
+    if (parts.size() >= kTiledParts)
+      return Error{name + ": more than " + std::to_string(kTiledParts) +
+                   " parts; not a digitize pack"};
     RawPart part;
     bool has_window = false;
     for (;;) {
@@ -168,13 +173,38 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
         if (w <= 0 || h <= 0)
           return Error{name + ": part " + std::to_string(parts.size()) +
                        " has an empty data window"};
-        if (w > options.max_texels || h > options.max_texels || w * h > options.max_texels)
+        // Checked against max_texels once the part is known to be scanline (below): a tiled
+        // part is read a tile at a time.
+        const int64_t limit = std::max(options.max_texels, options.max_tiled_texels);
+        if (w > limit || h > limit || w * h > limit)
           return Error{name + ": part " + std::to_string(parts.size()) + " claims " +
                        std::to_string(w) + "x" + std::to_string(h) + " pixels, more than the " +
-                       std::to_string(options.max_texels) + "-texel limit"};
+                       std::to_string(limit) + "-texel limit"};
         part.width = w;
         part.height = h;
         has_window = true;
+      } else if (attr == "tiles") {
+        // tiledesc: uint32 x size, uint32 y size, uint8 mode (its size is checked above). OpenEXR
+        // sizes its tile offset tables from these and the data window: a forged 1 x 1 tile over
+        // 2^32 texels would ask for 32 GB.
+        if (type != "tiledesc") return Error{name + ": malformed tiles attribute"};
+        int32_t tx = 0, ty = 0;
+        (void)read_i32(tx);
+        (void)read_i32(ty);
+        part.tile_x = tx;
+        part.tile_y = ty;
+        part.tile_mode = static_cast<uint8_t>(bytes[pos]);
+        pos += 1;
+        if (Status st = CheckPackTileSize(tx); !st.ok() || tx != ty)
+          return Error{name + ": part " + std::to_string(parts.size()) + " has " +
+                       std::to_string(tx) + " x " + std::to_string(ty) +
+                       " tiles; a digitize pack's are square, a power of two in [" +
+                       std::to_string(kMinPackTileSize) + ", " + std::to_string(kMaxPackTileSize) +
+                       "]"};
+        if (part.tile_mode != kTileModeMipmapRoundUp)
+          return Error{name + ": part " + std::to_string(parts.size()) + " has tile mode " +
+                       std::to_string(part.tile_mode) +
+                       "; a digitize pack's tiles are mip-mapped, rounding sizes up (17)"};
       } else if (attr == "channels") {
         if (type != "chlist") return Error{name + ": malformed channels attribute"};
         if (Status st =
@@ -188,11 +218,18 @@ Result<std::vector<RawPart>> ScanExrHeaders(const fs::path& path, uint64_t file_
     }
     if (!has_window)
       return Error{name + ": part " + std::to_string(parts.size()) + " has no dataWindow"};
+    if (part.tile_mode < 0 &&
+        (part.width > options.max_texels || part.height > options.max_texels ||
+         part.width * part.height > options.max_texels))
+      return Error{name + ": part " + std::to_string(parts.size()) + " claims " +
+                   std::to_string(part.width) + "x" + std::to_string(part.height) +
+                   " pixels, more than the " + std::to_string(options.max_texels) + "-texel limit"};
     parts.push_back(part);
   }
-  if (parts.size() != kParts)
+  if (parts.size() != kParts && parts.size() != kTiledParts)
     return Error{name + ": " + std::to_string(parts.size()) + " parts, a digitize pack has " +
-                 std::to_string(kParts) + " (surface, reflectance, boxes)"};
+                 std::to_string(kParts) + " (surface, reflectance, boxes) or, tiled, " +
+                 std::to_string(kTiledParts) + " (and checksums)"};
   return parts;
 }
 
@@ -308,6 +345,14 @@ Status ParseModelCounts(const std::string& file, const std::string& text, int64_
   return Status::Ok();
 }
 
+// Tiles over every level of a version 3 pack (rows of its checksums part, less the boxes row).
+int64_t TileCount(const PackSummary& s) {
+  int64_t n = 0;
+  for (const auto& [w, h] : s.levels)
+    n += int64_t{(w + s.tile_size - 1) / s.tile_size} * ((h + s.tile_size - 1) / s.tile_size);
+  return n;
+}
+
 struct Header {
   PackSummary summary;
   RigidTransform canvas_from_scan;
@@ -343,9 +388,9 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
   if (!version.ok()) return version.error();
   if (*version != std::floor(*version) || *version < 1)
     return Error{file + ": bad pack version " + FormatNumber(*version)};
-  if (*version > kPackVersion)
+  if (*version > kTiledPackVersion)
     return Error{file + ": pack version " + FormatNumber(*version) +
-                 " is newer than this reader (" + std::to_string(kPackVersion) +
+                 " is newer than this reader (" + std::to_string(kTiledPackVersion) +
                  "); update digitize"};
   s.version = static_cast<int>(*version);
   s.width = spec.width;
@@ -419,24 +464,77 @@ Result<Header> ReadHeader(const fs::path& path, const PackReadOptions& options,
                  " cells"};
   s.box_count = static_cast<size_t>(*box_count);
 
-  for (int part = 1; part < kParts; ++part) {
-    if (!in->seek_subimage(part, 0))
-      return Error{file + ": part " + std::to_string(part) + " (" + kPartNames[part] +
+  const bool tiled = s.version >= kTiledPackVersion;
+  const size_t parts = tiled ? kTiledParts : kParts;
+  if (raw->size() != parts)
+    return Error{file + ": " + std::to_string(raw->size()) + " parts; a version " +
+                 std::to_string(s.version) + " pack has " + std::to_string(parts)};
+  for (size_t part = 0; part < parts; ++part)
+    if ((raw->at(part).tile_mode >= 0) != (tiled && part < 2))
+      return Error{file + ": part " + std::to_string(part) + " is " +
+                   (raw->at(part).tile_mode >= 0 ? "tiled" : "not tiled") + "; a version " +
+                   std::to_string(s.version) + " pack's " +
+                   (tiled ? "surface and reflectance parts alone are tiled" : "parts are not")};
+  if (tiled) {
+    s.tile_size = raw->at(0).tile_x;
+    if (raw->at(1).tile_x != s.tile_size)
+      return Error{file + ": the surface and reflectance parts have different tile sizes"};
+    auto tile_attr = ParseNumber(file, spec, "digitize:tile_size");
+    if (!tile_attr.ok()) return tile_attr.error();
+    if (*tile_attr != s.tile_size)
+      return Error{file + ": digitize:tile_size " + FormatNumber(*tile_attr) + " but the parts' " +
+                   "tiles are " + std::to_string(s.tile_size)};
+    s.levels = PyramidLevelSizes(s.width, s.height);
+    auto levels_attr = ParseNumber(file, spec, "digitize:levels");
+    if (!levels_attr.ok()) return levels_attr.error();
+    if (*levels_attr != static_cast<double>(s.levels.size()))
+      return Error{file + ": digitize:levels " + FormatNumber(*levels_attr) + ", a " +
+                   std::to_string(s.width) + "x" + std::to_string(s.height) + " pyramid has " +
+                   std::to_string(s.levels.size())};
+    for (int part = 0; part < 2; ++part) {
+      for (size_t level = 0; level < s.levels.size(); ++level) {
+        if (!in->seek_subimage(part, static_cast<int>(level)))
+          return Error{file + ": part " + kPartNames[part] + " lacks level " +
+                       std::to_string(level) + " of " + std::to_string(s.levels.size())};
+        const OIIO::ImageSpec& ls = in->spec();
+        if (ls.width != s.levels[level][0] || ls.height != s.levels[level][1] ||
+            ls.tile_width != s.tile_size || ls.tile_height != s.tile_size || ls.x != 0 || ls.y != 0)
+          return Error{file + ": part " + kPartNames[part] + " level " + std::to_string(level) +
+                       " is " + std::to_string(ls.width) + "x" + std::to_string(ls.height) +
+                       ", expected " + std::to_string(s.levels[level][0]) + "x" +
+                       std::to_string(s.levels[level][1])};
+      }
+      if (in->seek_subimage(part, static_cast<int>(s.levels.size())))
+        return Error{file + ": part " + kPartNames[part] + " has more levels than " +
+                     std::to_string(s.levels.size())};
+    }
+  }
+  for (size_t part = 1; part < parts; ++part) {
+    if (!in->seek_subimage(static_cast<int>(part), 0))
+      return Error{file + ": part " + std::to_string(part) + " (" +
+                   (part < kParts ? kPartNames[part] : kChecksumPartName) +
                    ") cannot be read: " + OneLine(in->geterror())};
     const OIIO::ImageSpec& ps = in->spec();
-    const int want_w = part == 2 ? h.cells_x : s.width, want_h = part == 2 ? h.cells_y : s.height;
+    int64_t want_w = s.width, want_h = s.height;
+    if (part == 2) {
+      want_w = h.cells_x;
+      want_h = h.cells_y;
+    } else if (part == 3) {
+      want_w = 1;
+      want_h = TileCount(s) + 1;
+    }
     if (ps.width != want_w || ps.height != want_h || ps.width != raw->at(part).width ||
         ps.height != raw->at(part).height)
-      return Error{file + ": part " + kPartNames[part] + " is " + std::to_string(ps.width) + "x" +
-                   std::to_string(ps.height) + ", expected " + std::to_string(want_w) + "x" +
-                   std::to_string(want_h)};
+      return Error{file + ": part " + (part < kParts ? kPartNames[part] : kChecksumPartName) +
+                   " is " + std::to_string(ps.width) + "x" + std::to_string(ps.height) +
+                   ", expected " + std::to_string(want_w) + "x" + std::to_string(want_h)};
   }
   for (int part = 0; part < 2; ++part) {
     (void)in->seek_subimage(part, 0);
     s.raw_bytes_per_texel += static_cast<int>(in->spec().pixel_bytes(/*native=*/true));
   }
-  if (in->seek_subimage(kParts, 0))
-    return Error{file + ": more than " + std::to_string(kParts) + " parts"};
+  if (in->seek_subimage(static_cast<int>(parts), 0))
+    return Error{file + ": more than " + std::to_string(parts) + " parts"};
   if (!in->seek_subimage(0, 0)) return Error{file + ": cannot return to part 0"};
   if (keep_open) *keep_open = std::move(in);
   return h;
@@ -456,89 +554,71 @@ Status ReadPart(const std::string& file, OIIO::ImageInput& in, int part, OIIO::T
   return Status::Ok();
 }
 
-}  // namespace
-
-Result<PackSummary> InspectPack(const fs::path& path, const PackReadOptions& options) {
-  auto header = ReadHeader(path, options, nullptr);
-  if (!header.ok()) return header.error();
-  return header->summary;
+// Channel indices of part `part` (canonical order), for the readers.
+struct PartChannels {
+  std::vector<int> surface, reflectance, boxes;
+};
+Result<PartChannels> ReadChannels(const std::string& file, OIIO::ImageInput& in) {
+  PartChannels c;
+  const std::pair<std::vector<int>*, const std::vector<std::string>*> wanted[] = {
+      {&c.surface, &kSurfaceChannels},
+      {&c.reflectance, &kReflectanceChannels},
+      {&c.boxes, &kBoxChannels}};
+  for (int part = 0; part < kParts; ++part) {
+    if (!in.seek_subimage(part, 0))
+      return Error{file + ": cannot read part " + std::to_string(part)};
+    auto idx = ChannelIndices(file, in.spec(), kPartNames[part], *wanted[part].second);
+    if (!idx.ok()) return idx.error();
+    *wanted[part].first = *idx;
+  }
+  return c;
 }
 
-Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
-  const std::string file = path.string();
-  std::unique_ptr<OIIO::ImageInput> in;
-  auto header = ReadHeader(path, options, &in);
-  if (!header.ok()) return header.error();
-  const PackSummary& s = header->summary;
-  const int w = s.width, h = s.height;
-  const size_t n = static_cast<size_t>(w) * h;
+// Into the writer's channel order (the file's order is EXR's, sorted by name), so the checksum
+// and the decoding index by the canonical layout.
+template <class T>
+void Canonical(std::vector<T>& data, const std::vector<int>& ch) {
+  const size_t nc = ch.size();
+  std::vector<T> out(data.size());
+  for (size_t i = 0; i < data.size() / nc; ++i)
+    for (size_t k = 0; k < nc; ++k) out[i * nc + k] = data[i * nc + static_cast<size_t>(ch[k])];
+  data.swap(out);
+}
 
-  std::vector<int> surface_ch, refl_ch, box_ch;
-  OIIO::ImageSpec meta;
-  {
-    if (!in->seek_subimage(0, 0)) return Error{file + ": cannot read part 0"};
-    meta = in->spec();
-    auto c = ChannelIndices(file, in->spec(), kPartNames[0], kSurfaceChannels);
-    if (!c.ok()) return c.error();
-    surface_ch = *c;
-    if (!in->seek_subimage(1, 0)) return Error{file + ": cannot read part 1"};
-    c = ChannelIndices(file, in->spec(), kPartNames[1], kReflectanceChannels);
-    if (!c.ok()) return c.error();
-    refl_ch = *c;
-    if (!in->seek_subimage(2, 0)) return Error{file + ": cannot read part 2"};
-    c = ChannelIndices(file, in->spec(), kPartNames[2], kBoxChannels);
-    if (!c.ok()) return c.error();
-    box_ch = *c;
-  }
-  std::vector<uint16_t> surface, reflectance;
-  std::vector<float> cells;
-  if (Status st = ReadPart(file, *in, 0, OIIO::TypeDesc::HALF, surface); !st.ok())
-    return Error{st.message()};
-  if (Status st = ReadPart(file, *in, 1, OIIO::TypeDesc::HALF, reflectance); !st.ok())
-    return Error{st.message()};
-  if (Status st = ReadPart(file, *in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok())
-    return Error{st.message()};
-  // Into the writer's channel order (the file's order is EXR's, sorted by name), so the checksum
-  // and everything below index by the canonical layout.
-  auto canonical = [](auto& data, const std::vector<int>& ch) {
-    const size_t nc = ch.size();
-    std::vector<typename std::decay_t<decltype(data)>::value_type> out(data.size());
-    for (size_t i = 0; i < data.size() / nc; ++i)
-      for (size_t k = 0; k < nc; ++k) out[i * nc + k] = data[i * nc + static_cast<size_t>(ch[k])];
-    data.swap(out);
-  };
-  canonical(surface, surface_ch);
-  canonical(reflectance, refl_ch);
-  canonical(cells, box_ch);
-  {
-    const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
-    const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2,
-                                       cells.size() * 4};
-    const std::string stored = meta.get_string_attribute("digitize:checksum");
-    if (stored.empty()) return Error{file + ": header attribute digitize:checksum is missing"};
-    const bool intact = PackChecksum(meta, data, data_bytes) == stored;
+Status ChecksumMatches(const std::string& file, bool intact, const std::string& what) {
 #ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
-    if (!intact)
-      return Error{file + ": checksum mismatch: the file was modified or corrupted after writing"};
+  if (!intact)
+    return Error{file + ": checksum mismatch" + what +
+                 ": the file was modified or corrupted after writing"};
 #else
-    // The fuzz build (tests/fuzz/) goes on, so that mutated inputs reach the value checks below.
-    (void)intact;
+  // The fuzz build (tests/fuzz/) goes on, so that mutated inputs reach the value checks below.
+  (void)intact;
+  (void)what;
 #endif
-  }
+  return Status::Ok();
+}
 
-  Pack pack;
-  pack.field.pitch_mm = s.pitch_mm;
-  pack.field.height_mm = Grid<float>(w, h);
-  pack.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
-  pack.normals = Grid<Vec3f>(w, h);
-  pack.maps = ReflectanceMaps::Zeros(w, h);
-  pack.delta0_mm = s.delta0_mm;
-  pack.max_height_mm = s.max_height_mm;
-  pack.cell_px = s.cell_px;
-  pack.canvas_from_scan = header->canvas_from_scan;
-  pack.provenance = s.provenance;
+PackLevel EmptyLevel(int w, int h, double pitch_mm) {
+  PackLevel l;
+  l.field.pitch_mm = pitch_mm;
+  l.field.height_mm = Grid<float>(w, h);
+  l.field.state = Grid<TexelState>(w, h, TexelState::kOutside);
+  l.normals = Grid<Vec3f>(w, h);
+  l.maps = ReflectanceMaps::Zeros(w, h);
+  return l;
+}
+
+}  // namespace
+
+namespace pack_exr {
+
+Status DecodeTexels(const std::string& file, int version, const uint16_t* surface,
+                    const uint16_t* reflectance, int w, int h, int x0, int y0,
+                    const std::string& where, PackLevel& out) {
+  const size_t n = static_cast<size_t>(w) * h;
   auto bad = [&](size_t i, const std::string& what) {
-    return Error{file + ": texel " + TexelName(int(i % w), int(i / w)) + ": " + what};
+    return Error{file + ": texel " + TexelName(x0 + int(i % w), y0 + int(i / w)) + where + ": " +
+                 what};
   };
   for (size_t i = 0; i < n; ++i) {
     const uint16_t* sp = &surface[4 * i];
@@ -553,7 +633,7 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       return bad(i, "normal (" + FormatNumber(nx) + ", " + FormatNumber(ny) +
                         ") is not a unit normal's x, y");
     // Version 1: state + 4 x status (below 24); version 2 adds kModelStride x model.
-    const bool v1 = s.version == 1;
+    const bool v1 = version == 1;
     const int stride = v1 ? kStatesPerStatus * kTexelFitStatusCount : kModelStride;
     if (!(code >= 0 && code < (v1 ? stride : 2048) && code == std::floor(code)) ||
         (static_cast<int>(code) % stride) / kStatesPerStatus >= kTexelFitStatusCount)
@@ -565,11 +645,11 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
                         std::to_string(c / stride) + ", which this reader does not know (" +
                         KnownModels() + ")");
     const auto model = static_cast<ReflectanceModel>(c / stride);
-    pack.field.height_mm.data[i] = height;
-    pack.field.state.data[i] = static_cast<TexelState>(c % kStatesPerStatus);
-    pack.maps.status.data[i] = static_cast<TexelFitStatus>((c % stride) / kStatesPerStatus);
-    pack.maps.model.data[i] = model;
-    pack.normals.data[i] = NormalFromXY(nx, ny);
+    out.field.height_mm.data[i] = height;
+    out.field.state.data[i] = static_cast<TexelState>(c % kStatesPerStatus);
+    out.maps.status.data[i] = static_cast<TexelFitStatus>((c % stride) / kStatesPerStatus);
+    out.maps.model.data[i] = model;
+    out.normals.data[i] = NormalFromXY(nx, ny);
     float v[9];
     for (int k = 0; k < 9; ++k) {
       v[k] = FromHalfBits(rp[k]);
@@ -578,9 +658,9 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
     for (int k = 0; k < 6; ++k)
       if (v[k] < 0) return bad(i, kReflectanceChannels[k] + " is negative");
     if (v[8] < 0) return bad(i, "lobe.k is negative");
-    pack.maps.rho_d.data[i] = Vec3f(v[0], v[1], v[2]);
-    pack.maps.rho_s.data[i] = Vec3f(v[3], v[4], v[5]);
-    pack.maps.lobe.data[i] = {v[6], v[7], 1.0f, v[8]};
+    out.maps.rho_d.data[i] = Vec3f(v[0], v[1], v[2]);
+    out.maps.rho_s.data[i] = Vec3f(v[3], v[4], v[5]);
+    out.maps.lobe.data[i] = {v[6], v[7], 1.0f, v[8]};
     if (model == ReflectanceModel::kGgx) {
       if (v[3] > 1 || v[4] > 1 || v[5] > 1) return bad(i, "a GGX texel's F0 (rho_s) exceeds 1");
       if (!(v[8] >= kGgxMinAlpha && v[8] <= kGgxMaxAlpha))
@@ -589,10 +669,13 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       if (v[6] != 0 || v[7] != 0) return bad(i, "a GGX texel's lobe.cx, lobe.cy must be 0");
     }
   }
-  if (const auto counts = CountModels(pack.maps); counts != s.texels_by_model)
-    return Error{file + ": the texels are " + ModelCountsText(counts) +
-                 ", the header's digitize:models says " + ModelCountsText(s.texels_by_model)};
-  const int cells_x = header->cells_x, cells_y = header->cells_y;
+  return Status::Ok();
+}
+
+Result<std::vector<ReliefBox>> DecodeBoxCells(const std::string& file, const float* cells, int w,
+                                              int h, int cell_px, size_t box_count) {
+  const int cells_x = (w + cell_px - 1) / cell_px, cells_y = (h + cell_px - 1) / cell_px;
+  std::vector<ReliefBox> boxes;
   for (int cy = 0; cy < cells_y; ++cy)
     for (int cx = 0; cx < cells_x; ++cx) {
       const float* c = &cells[4 * (static_cast<size_t>(cy) * cells_x + cx)];
@@ -602,10 +685,10 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       if (present == 0) continue;
       if (present != 1) return Error{cell + ": present must be 0 or 1"};
       ReliefBox b;
-      b.x0 = cx * s.cell_px;
-      b.y0 = cy * s.cell_px;
-      b.width = std::min(s.cell_px, w - b.x0);
-      b.height = std::min(s.cell_px, h - b.y0);
+      b.x0 = cx * cell_px;
+      b.y0 = cy * cell_px;
+      b.width = std::min(cell_px, w - b.x0);
+      b.height = std::min(cell_px, h - b.y0);
       if (!(du >= 0 && dv >= 0 && du < b.width && dv < b.height && du == std::floor(du) &&
             dv == std::floor(dv)))
         return Error{cell + ": highest texel offset (" + FormatNumber(du) + ", " +
@@ -616,11 +699,271 @@ Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
       b.h_max_mm = hmax;
       b.u_max = b.x0 + static_cast<int>(du);
       b.v_max = b.y0 + static_cast<int>(dv);
-      pack.boxes.push_back(b);
+      boxes.push_back(b);
     }
-  if (pack.boxes.size() != s.box_count)
-    return Error{file + ": " + std::to_string(pack.boxes.size()) + " boxes, the header says " +
-                 std::to_string(s.box_count)};
+  if (boxes.size() != box_count)
+    return Error{file + ": " + std::to_string(boxes.size()) + " boxes, the header says " +
+                 std::to_string(box_count)};
+  return boxes;
+}
+
+}  // namespace pack_exr
+
+// --- version 3: tiles ---------------------------------------------------------------------
+
+struct TiledPackReader::Impl {
+  std::string file;
+  std::unique_ptr<OIIO::ImageInput> in;
+  Header header;
+  PartChannels channels;
+  std::vector<int64_t> first_row;  // checksum row of each level's first tile
+  std::vector<uint32_t> digests;   // 5 words per row
+  std::vector<ReliefBox> boxes;
+  std::mutex mutex;  // one ImageInput: reads are serialised (decoding and checks are not)
+};
+
+TiledPackReader::TiledPackReader(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TiledPackReader::~TiledPackReader() = default;
+const PackSummary& TiledPackReader::summary() const { return impl_->header.summary; }
+const std::vector<ReliefBox>& TiledPackReader::boxes() const { return impl_->boxes; }
+const RigidTransform& TiledPackReader::canvas_from_scan() const {
+  return impl_->header.canvas_from_scan;
+}
+
+Result<std::unique_ptr<TiledPackReader>> TiledPackReader::Open(const fs::path& path,
+                                                               const PackReadOptions& options) {
+  auto impl = std::make_unique<Impl>();
+  impl->file = path.string();
+  const std::string& file = impl->file;
+  auto header = ReadHeader(path, options, &impl->in);
+  if (!header.ok()) return header.error();
+  impl->header = std::move(header).value();
+  const PackSummary& s = impl->header.summary;
+  if (s.version < kTiledPackVersion)
+    return Error{file + ": a version " + std::to_string(s.version) +
+                 " pack has one grid, no tiles (read it with ReadPack)"};
+  OIIO::ImageInput& in = *impl->in;
+  {
+    const std::string stored = in.spec().get_string_attribute("digitize:checksum");
+    if (stored.empty()) return Error{file + ": header attribute digitize:checksum is missing"};
+    const bool intact = PackChecksum(DigitizeAttributes(in.spec()), nullptr, nullptr, 0) == stored;
+    if (Status st = ChecksumMatches(file, intact, " of the header attributes"); !st.ok())
+      return Error{st.message()};
+  }
+  auto channels = ReadChannels(file, in);
+  if (!channels.ok()) return channels.error();
+  impl->channels = *channels;
+  if (!in.seek_subimage(3, 0)) return Error{file + ": cannot read part 3"};
+  auto sha_ch = ChannelIndices(file, in.spec(), kChecksumPartName, kChecksumChannels);
+  if (!sha_ch.ok()) return sha_ch.error();
+  const int rows = in.spec().height;
+  impl->digests.resize(static_cast<size_t>(rows) * 5);
+  if (!in.read_image(3, 0, 0, 5, OIIO::TypeDesc::UINT32, impl->digests.data()))
+    return Error{file + ": part checksums is corrupt or truncated (" + OneLine(in.geterror()) +
+                 ")"};
+  Canonical(impl->digests, *sha_ch);
+  int64_t row = 0;
+  for (const auto& [w, h] : s.levels) {
+    impl->first_row.push_back(row);
+    row += int64_t{(w + s.tile_size - 1) / s.tile_size} * ((h + s.tile_size - 1) / s.tile_size);
+  }
+  // The boxes part, checked against its digest (the last row).
+  std::vector<float> cells;
+  if (Status st = ReadPart(file, in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok())
+    return Error{st.message()};
+  Canonical(cells, impl->channels.boxes);
+  {
+    uint32_t digest[5];
+    OIIO::SHA1(cells.data(), cells.size() * 4).gethash(digest);
+    const bool intact =
+        std::equal(digest, digest + 5, &impl->digests[5 * static_cast<size_t>(row)]);
+    if (Status st = ChecksumMatches(file, intact, " in the boxes part"); !st.ok())
+      return Error{st.message()};
+  }
+  auto boxes = DecodeBoxCells(file, cells.data(), s.width, s.height, s.cell_px, s.box_count);
+  if (!boxes.ok()) return boxes.error();
+  impl->boxes = std::move(boxes).value();
+  PackHeader check;
+  check.width = s.width;
+  check.height = s.height;
+  check.pitch_mm = s.pitch_mm;
+  check.delta0_mm = s.delta0_mm;
+  check.max_height_mm = s.max_height_mm;
+  check.cell_px = s.cell_px;
+  check.boxes = impl->boxes;
+  check.canvas_from_scan = impl->header.canvas_from_scan;
+  if (Status st = CheckHeader(check); !st.ok()) return Error{file + ": " + st.message()};
+  return std::unique_ptr<TiledPackReader>(new TiledPackReader(std::move(impl)));
+}
+
+Result<PackTile> TiledPackReader::ReadTile(int level, int tile_x, int tile_y) {
+  Impl& m = *impl_;
+  const PackSummary& s = m.header.summary;
+  if (level < 0 || level >= static_cast<int>(s.levels.size()))
+    return Error{m.file + ": no level " + std::to_string(level) + " (the pack has " +
+                 std::to_string(s.levels.size()) + ")"};
+  const int lw = s.levels[level][0], lh = s.levels[level][1], t = s.tile_size;
+  const int tiles_x = (lw + t - 1) / t, tiles_y = (lh + t - 1) / t;
+  if (tile_x < 0 || tile_y < 0 || tile_x >= tiles_x || tile_y >= tiles_y)
+    return Error{m.file + ": level " + std::to_string(level) + " has " + std::to_string(tiles_x) +
+                 " x " + std::to_string(tiles_y) + " tiles, no tile " + std::to_string(tile_x) +
+                 ", " + std::to_string(tile_y)};
+  PackTile tile;
+  tile.level = level;
+  tile.tile_x = tile_x;
+  tile.tile_y = tile_y;
+  tile.x0 = tile_x * t;
+  tile.y0 = tile_y * t;
+  const int w = std::min(t, lw - tile.x0), h = std::min(t, lh - tile.y0);
+  const size_t n = static_cast<size_t>(w) * h;
+  std::vector<uint16_t> surface(n * 4), reflectance(n * 9);
+  {
+    const std::lock_guard<std::mutex> lock(m.mutex);
+    for (auto [part, data] :
+         {std::pair<int, uint16_t*>{0, surface.data()}, {1, reflectance.data()}})
+      if (!m.in->read_tiles(part, level, tile.x0, tile.x0 + w, tile.y0, tile.y0 + h, 0, 1, 0,
+                            part == 0 ? 4 : 9, OIIO::TypeDesc::HALF, data))
+        return Error{m.file + ": part " + kPartNames[part] + " level " + std::to_string(level) +
+                     " tile " + std::to_string(tile_x) + ", " + std::to_string(tile_y) +
+                     " is corrupt or truncated (" + OneLine(m.in->geterror()) + ")"};
+  }
+  Canonical(surface, m.channels.surface);
+  Canonical(reflectance, m.channels.reflectance);
+  const std::string where = level > 0 ? " of level " + std::to_string(level) : std::string();
+  {
+    OIIO::SHA1 sha;
+    sha.append(surface.data(), surface.size() * 2);
+    sha.append(reflectance.data(), reflectance.size() * 2);
+    uint32_t digest[5];
+    sha.gethash(digest);
+    const size_t row = static_cast<size_t>(m.first_row[level] + int64_t{tile_y} * tiles_x + tile_x);
+    if (Status st = ChecksumMatches(
+            m.file, std::equal(digest, digest + 5, &m.digests[5 * row]),
+            " in tile " + std::to_string(tile_x) + ", " + std::to_string(tile_y) + where);
+        !st.ok())
+      return Error{st.message()};
+  }
+  tile.texels = EmptyLevel(w, h, s.pitch_mm * std::ldexp(1.0, level));
+  if (Status st = DecodeTexels(m.file, s.version, surface.data(), reflectance.data(), w, h, tile.x0,
+                               tile.y0, where, tile.texels);
+      !st.ok())
+    return Error{st.message()};
+  tile.texels.max_height_mm = tile.texels.field.height_mm;
+  return tile;
+}
+
+Result<PackSummary> InspectPack(const fs::path& path, const PackReadOptions& options) {
+  auto header = ReadHeader(path, options, nullptr);
+  if (!header.ok()) return header.error();
+  return header->summary;
+}
+
+namespace {
+
+// A version 3 pack whole: level 0's tiles, each checked, into one grid.
+Result<Pack> ReadTiledPack(const fs::path& path, const PackReadOptions& options) {
+  const std::string file = path.string();
+  auto reader = TiledPackReader::Open(path, options);
+  if (!reader.ok()) return reader.error();
+  const PackSummary& s = (*reader)->summary();
+  if (int64_t{s.width} * s.height > options.max_texels)
+    return Error{file + ": " + std::to_string(s.width) + "x" + std::to_string(s.height) +
+                 " texels, more than the " + std::to_string(options.max_texels) +
+                 "-texel limit of a whole read (read its tiles instead)"};
+  const PackLevel whole = EmptyLevel(s.width, s.height, s.pitch_mm);
+  Pack pack;
+  pack.field = whole.field;
+  pack.normals = whole.normals;
+  pack.maps = whole.maps;
+  const int t = s.tile_size;
+  for (int ty = 0; ty * t < s.height; ++ty)
+    for (int tx = 0; tx * t < s.width; ++tx) {
+      auto tile = (*reader)->ReadTile(0, tx, ty);
+      if (!tile.ok()) return tile.error();
+      const PackLevel& l = tile->texels;
+      for (int y = 0; y < l.field.height(); ++y)
+        for (int x = 0; x < l.field.width(); ++x) {
+          const int X = tile->x0 + x, Y = tile->y0 + y;
+          pack.field.height_mm(X, Y) = l.field.height_mm(x, y);
+          pack.field.state(X, Y) = l.field.state(x, y);
+          pack.normals(X, Y) = l.normals(x, y);
+          pack.maps.rho_d(X, Y) = l.maps.rho_d(x, y);
+          pack.maps.rho_s(X, Y) = l.maps.rho_s(x, y);
+          pack.maps.lobe(X, Y) = l.maps.lobe(x, y);
+          pack.maps.status(X, Y) = l.maps.status(x, y);
+          pack.maps.model(X, Y) = l.maps.model(x, y);
+        }
+    }
+  pack.delta0_mm = s.delta0_mm;
+  pack.max_height_mm = s.max_height_mm;
+  pack.cell_px = s.cell_px;
+  pack.boxes = (*reader)->boxes();
+  pack.provenance = s.provenance;
+  pack.canvas_from_scan = (*reader)->canvas_from_scan();
+  if (const auto counts = CountModels(pack.maps); counts != s.texels_by_model)
+    return Error{file + ": the texels are " + ModelCountsText(counts) +
+                 ", the header's digitize:models says " + ModelCountsText(s.texels_by_model)};
+  if (Status st = pack.Validate(); !st.ok()) return Error{file + ": " + st.message()};
+  return pack;
+}
+
+}  // namespace
+
+Result<Pack> ReadPack(const fs::path& path, const PackReadOptions& options) {
+  const std::string file = path.string();
+  std::unique_ptr<OIIO::ImageInput> in;
+  auto header = ReadHeader(path, options, &in);
+  if (!header.ok()) return header.error();
+  const PackSummary& s = header->summary;
+  if (s.version >= kTiledPackVersion) {
+    in.reset();
+    return ReadTiledPack(path, options);
+  }
+  const int w = s.width, h = s.height;
+  auto channels = ReadChannels(file, *in);
+  if (!channels.ok()) return channels.error();
+  if (!in->seek_subimage(0, 0)) return Error{file + ": cannot read part 0"};
+  const OIIO::ImageSpec meta = in->spec();
+  std::vector<uint16_t> surface, reflectance;
+  std::vector<float> cells;
+  if (Status st = ReadPart(file, *in, 0, OIIO::TypeDesc::HALF, surface); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 1, OIIO::TypeDesc::HALF, reflectance); !st.ok())
+    return Error{st.message()};
+  if (Status st = ReadPart(file, *in, 2, OIIO::TypeDesc::FLOAT, cells); !st.ok())
+    return Error{st.message()};
+  Canonical(surface, channels->surface);
+  Canonical(reflectance, channels->reflectance);
+  Canonical(cells, channels->boxes);
+  {
+    const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
+    const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2,
+                                       cells.size() * 4};
+    const std::string stored = meta.get_string_attribute("digitize:checksum");
+    if (stored.empty()) return Error{file + ": header attribute digitize:checksum is missing"};
+    const bool intact = PackChecksum(DigitizeAttributes(meta), data, data_bytes, kParts) == stored;
+    if (Status st = ChecksumMatches(file, intact, ""); !st.ok()) return Error{st.message()};
+  }
+  PackLevel texels = EmptyLevel(w, h, s.pitch_mm);
+  if (Status st =
+          DecodeTexels(file, s.version, surface.data(), reflectance.data(), w, h, 0, 0, "", texels);
+      !st.ok())
+    return Error{st.message()};
+  Pack pack;
+  pack.field = std::move(texels.field);
+  pack.normals = std::move(texels.normals);
+  pack.maps = std::move(texels.maps);
+  pack.delta0_mm = s.delta0_mm;
+  pack.max_height_mm = s.max_height_mm;
+  pack.cell_px = s.cell_px;
+  pack.canvas_from_scan = header->canvas_from_scan;
+  pack.provenance = s.provenance;
+  if (const auto counts = CountModels(pack.maps); counts != s.texels_by_model)
+    return Error{file + ": the texels are " + ModelCountsText(counts) +
+                 ", the header's digitize:models says " + ModelCountsText(s.texels_by_model)};
+  auto boxes = DecodeBoxCells(file, cells.data(), w, h, s.cell_px, s.box_count);
+  if (!boxes.ok()) return boxes.error();
+  pack.boxes = std::move(boxes).value();
   if (Status st = pack.Validate(); !st.ok()) return Error{file + ": " + st.message()};
   return pack;
 }
@@ -647,6 +990,10 @@ std::string PackSummaryJson(const std::string& file, const PackSummary& s) {
     j["models"][ToString(static_cast<ReflectanceModel>(m))] = s.texels_by_model[m];
   if (s.encoding == PackEncoding::kQuantised)
     j["mantissa_bits"] = ToJson(PackWriteOptions{s.encoding, s.quantisation})["mantissa_bits"];
+  if (s.tile_size > 0) {
+    j["tile_size"] = s.tile_size;
+    j["levels"] = s.levels;
+  }
   return j.dump(2, ' ', /*ensure_ascii=*/true, json::error_handler_t::replace);
 }
 

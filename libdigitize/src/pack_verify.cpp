@@ -5,6 +5,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/pack.h"
+#include "digitize/pack_tiled.h"
 #include "pack_exr.h"
 
 namespace digitize {
@@ -21,8 +22,26 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   PackVerification v;
   v.summary = *summary;
   const Pack& p = *pack;
-  v.checks.push_back("container: OpenEXR, 3 parts, version " + std::to_string(v.summary.version) +
-                     ", " + ToString(v.summary.encoding) + " encoding");
+  const bool tiled = v.summary.version >= kTiledPackVersion;
+  v.checks.push_back("container: OpenEXR, " + std::to_string(tiled ? 4 : 3) + " parts, version " +
+                     std::to_string(v.summary.version) + ", " + ToString(v.summary.encoding) +
+                     " encoding");
+  if (tiled) {
+    // ReadPack read level 0; the levels below are what a streaming viewer reads far away.
+    auto reader = TiledPackReader::Open(path, options);
+    if (!reader.ok()) return reader.error();
+    const int t = v.summary.tile_size;
+    int64_t tiles = 0;
+    for (size_t l = 0; l < v.summary.levels.size(); ++l)
+      for (int ty = 0; ty * t < v.summary.levels[l][1]; ++ty)
+        for (int tx = 0; tx * t < v.summary.levels[l][0]; ++tx, ++tiles) {
+          auto tile = (*reader)->ReadTile(static_cast<int>(l), tx, ty);
+          if (!tile.ok()) return tile.error();
+        }
+    v.checks.push_back("tiles: " + std::to_string(tiles) + " tiles of " + std::to_string(t) +
+                       " texels over " + std::to_string(v.summary.levels.size()) +
+                       " levels, each matching its SHA-1, every value checked");
+  }
   v.checks.push_back(
       "geometry: pitch " + FormatNumber(p.field.pitch_mm, kRoundTripDigits) + " mm, " +
       FormatNumber(p.width_mm(), kRoundTripDigits) + " x " +

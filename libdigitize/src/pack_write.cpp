@@ -29,56 +29,67 @@ std::string QuantisationText(const PackQuantisation& q) {
 
 }  // namespace
 
+namespace pack_exr {
+
+Attributes PackAttributes(const PackHeader& header, const PackWriteOptions& options) {
+  const bool tiled = options.tile_size > 0;
+  Attributes a = {{"digitize:format", kPackFormatName},
+                  {"digitize:version", std::to_string(tiled ? kTiledPackVersion : kPackVersion)},
+                  {"digitize:encoding", ToString(options.encoding)}};
+  if (options.encoding == PackEncoding::kQuantised)
+    a.emplace_back("digitize:quantisation", QuantisationText(options.quantisation));
+  a.emplace_back("digitize:gauge", kGauge);
+  a.emplace_back(
+      "digitize:units",
+      "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
+      "M = texel state + 4 x fit status + 64 x reflectance model (0 lafortune, 1 ggx); rho_d "
+      "1/sr; rho_s 1/sr (lafortune) or F0 in [0, 1] (ggx); lobe.k exponent (lafortune) or GGX "
+      "alpha (ggx); boxes: h_max mm, u/v_max texels from the cell corner");
+  a.emplace_back("digitize:models", ModelCountsText(header.texels_by_model));
+  a.emplace_back("digitize:pitch_mm", FormatNumber(header.pitch_mm, kRoundTripDigits));
+  a.emplace_back("digitize:size_mm",
+                 FormatNumber(header.width * header.pitch_mm, kRoundTripDigits) + " x " +
+                     FormatNumber(header.height * header.pitch_mm, kRoundTripDigits));
+  a.emplace_back("digitize:delta0_mm", FormatNumber(header.delta0_mm, kRoundTripDigits));
+  a.emplace_back("digitize:max_height_mm", FormatNumber(header.max_height_mm, kRoundTripDigits));
+  a.emplace_back("digitize:cell_px", std::to_string(header.cell_px));
+  a.emplace_back("digitize:box_count", std::to_string(header.boxes.size()));
+  a.emplace_back("digitize:canvas_from_scan", ToJson(header.canvas_from_scan).dump());
+  // File names are bytes, not always UTF-8 (a capture machine's Latin-1 names): replaced, not
+  // thrown on.
+  a.emplace_back("digitize:provenance",
+                 ProvenanceToJson(header.provenance)
+                     .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  if (tiled) {
+    a.emplace_back("digitize:tile_size", std::to_string(options.tile_size));
+    a.emplace_back("digitize:levels",
+                   std::to_string(PyramidLevelSizes(header.width, header.height).size()));
+  }
+  return a;
+}
+
+}  // namespace pack_exr
+
 Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions& options) {
   const std::string file = path.string();
   if (Status s = options.Validate(); !s.ok()) return Error{file + ": " + s.message()};
   if (Status s = pack.Validate(); !s.ok()) return Error{file + ": " + s.message()};
-  const int w = pack.width(), h = pack.height();
   // Values must survive half: a texel beyond its range would read back as Inf.
-  auto check_range = [&](const char* map, size_t i, float v) -> Status {
-    if (std::abs(v) > kHalfMax)
-      return Error{file + ": " + map + " at texel " + TexelName(int(i % w), int(i / w)) + " = " +
-                   FormatNumber(v) + " exceeds the half-float range (65504)"};
-    return Status::Ok();
-  };
-  for (size_t i = 0; i < pack.field.height_mm.size(); ++i) {
-    Status s = check_range("height", i, pack.field.height_mm.data[i]);
-    for (int c = 0; c < 3 && s.ok(); ++c) s = check_range("rho_d", i, pack.maps.rho_d.data[i][c]);
-    for (int c = 0; c < 3 && s.ok(); ++c) s = check_range("rho_s", i, pack.maps.rho_s.data[i][c]);
-    for (int c : {0, 1, 3})
-      if (s.ok()) s = check_range("lobe", i, pack.maps.lobe.data[i][c]);
-    if (!s.ok()) return s;
-  }
+  if (Status s = CheckHalfRange(pack); !s.ok()) return Error{file + ": " + s.message()};
+  if (options.tile_size > 0)
+    return WriteTiledPack(
+        path, HeaderOf(pack), options,
+        [&](int y0, int rows) -> Result<PackLevel> { return PackRows(pack, y0, rows); });
+  const int w = pack.width(), h = pack.height();
   const Pack enc = EncodePackValues(pack, options);
   const size_t n = static_cast<size_t>(w) * h;
 
   std::vector<uint16_t> surface(n * 4), reflectance(n * 9);
-  for (size_t i = 0; i < n; ++i) {
-    surface[4 * i + 0] = ToHalfBits(enc.field.height_mm.data[i]);
-    surface[4 * i + 1] = ToHalfBits(enc.normals.data[i].x());
-    surface[4 * i + 2] = ToHalfBits(enc.normals.data[i].y());
-    surface[4 * i + 3] = ToHalfBits(static_cast<float>(
-        TexelCode(pack.field.state.data[i], pack.maps.status.data[i], pack.maps.model.data[i])));
-    uint16_t* r = &reflectance[9 * i];
-    for (int c = 0; c < 3; ++c) {
-      r[c] = ToHalfBits(enc.maps.rho_d.data[i][c]);
-      r[3 + c] = ToHalfBits(enc.maps.rho_s.data[i][c]);
-    }
-    r[6] = ToHalfBits(enc.maps.lobe.data[i][0]);
-    r[7] = ToHalfBits(enc.maps.lobe.data[i][1]);
-    r[8] = ToHalfBits(enc.maps.lobe.data[i][3]);
-  }
+  for (size_t i = 0; i < n; ++i)
+    EncodeTexel(enc.field, enc.normals, enc.maps, i, &surface[4 * i], &reflectance[9 * i]);
   const int cells_x = (w + pack.cell_px - 1) / pack.cell_px,
             cells_y = (h + pack.cell_px - 1) / pack.cell_px;
-  std::vector<float> cells(static_cast<size_t>(cells_x) * cells_y * 4, 0.0f);
-  for (const ReliefBox& b : pack.boxes) {
-    float* c =
-        &cells[4 * (static_cast<size_t>(b.y0 / pack.cell_px) * cells_x + b.x0 / pack.cell_px)];
-    c[0] = 1.0f;
-    c[1] = b.h_max_mm;
-    c[2] = static_cast<float>(b.u_max - b.x0);
-    c[3] = static_cast<float>(b.v_max - b.y0);
-  }
+  const std::vector<float> cells = BoxCells(pack.boxes, w, h, pack.cell_px);
 
   OIIO::ImageSpec specs[kParts];
   specs[0] = OIIO::ImageSpec(w, h, 4, OIIO::TypeDesc::HALF);
@@ -96,36 +107,11 @@ Status WritePack(const fs::path& path, const Pack& pack, const PackWriteOptions&
     specs[p].attribute("compression", "zip");
   }
   OIIO::ImageSpec& meta = specs[0];
-  meta.attribute("digitize:format", kPackFormatName);
-  meta.attribute("digitize:version", std::to_string(kPackVersion));
-  meta.attribute("digitize:encoding", ToString(options.encoding));
-  if (options.encoding == PackEncoding::kQuantised)
-    meta.attribute("digitize:quantisation", QuantisationText(options.quantisation));
-  meta.attribute("digitize:gauge", kGauge);
-  meta.attribute(
-      "digitize:units",
-      "H mm above the canvas plane; NX NY unit normal (nz = sqrt(1 - nx^2 - ny^2)); "
-      "M = texel state + 4 x fit status + 64 x reflectance model (0 lafortune, 1 ggx); rho_d "
-      "1/sr; rho_s 1/sr (lafortune) or F0 in [0, 1] (ggx); lobe.k exponent (lafortune) or GGX "
-      "alpha (ggx); boxes: h_max mm, u/v_max texels from the cell corner");
-  meta.attribute("digitize:models", ModelCountsText(CountModels(pack.maps)));
-  meta.attribute("digitize:pitch_mm", FormatNumber(pack.field.pitch_mm, kRoundTripDigits));
-  meta.attribute("digitize:size_mm", FormatNumber(pack.width_mm(), kRoundTripDigits) + " x " +
-                                         FormatNumber(pack.height_mm(), kRoundTripDigits));
-  meta.attribute("digitize:delta0_mm", FormatNumber(pack.delta0_mm, kRoundTripDigits));
-  meta.attribute("digitize:max_height_mm", FormatNumber(pack.max_height_mm, kRoundTripDigits));
-  meta.attribute("digitize:cell_px", std::to_string(pack.cell_px));
-  meta.attribute("digitize:box_count", std::to_string(pack.boxes.size()));
-  meta.attribute("digitize:canvas_from_scan", ToJson(pack.canvas_from_scan).dump());
-  // File names are bytes, not always UTF-8 (a capture machine's Latin-1 names): replaced, not
-  // thrown on.
-  meta.attribute("digitize:provenance",
-                 ProvenanceToJson(pack.provenance)
-                     .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+  const Attributes attributes = PackAttributes(HeaderOf(pack), options);
+  for (const auto& [name, value] : attributes) meta.attribute(name, value);
   const void* data[kParts] = {surface.data(), reflectance.data(), cells.data()};
   const size_t data_bytes[kParts] = {surface.size() * 2, reflectance.size() * 2, cells.size() * 4};
-  meta.attribute("digitize:checksum", PackChecksum(meta, data, data_bytes));
-
+  meta.attribute("digitize:checksum", PackChecksum(attributes, data, data_bytes, kParts));
   // Not through WriteImageAtomically: OpenImageIO's multi-part OpenEXR open ignores I/O
   // proxies. OpenEXR reports failed writes itself; a full disk is named from the file system.
   return WriteAtomically(path, [&](const fs::path& temp) -> Status {

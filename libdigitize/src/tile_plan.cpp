@@ -9,6 +9,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/output_dir.h"
+#include "digitize/pack_tiled.h"
 #include "digitize/pipeline.h"
 #include "digitize/preprocess.h"
 #include "json_fields.h"
@@ -24,7 +25,7 @@ static_assert(sizeof(TraceOptions) == 24, "carry the new TraceOptions field in t
 static_assert(sizeof(SampleOptions) == 56, "carry the new SampleOptions field in the tile plan");
 static_assert(sizeof(BrdfFitOptions) == 128, "carry the new BrdfFitOptions field in the plan");
 static_assert(sizeof(ReflectanceFitOptions) == 232, "carry the new fit option in the tile plan");
-static_assert(sizeof(PackWriteOptions) == 20, "carry the new pack option in the tile plan");
+static_assert(sizeof(PackWriteOptions) == 24, "carry the new pack option in the tile plan");
 
 fs::path TilePlan::TileFolder(size_t index) const {
   char name[32];
@@ -104,7 +105,8 @@ json OptionsJson(const TilePlan& p) {
             {"height_bits", p.pack.quantisation.height_bits},
             {"normal_bits", p.pack.quantisation.normal_bits},
             {"rho_bits", p.pack.quantisation.rho_bits},
-            {"lobe_bits", p.pack.quantisation.lobe_bits}}}};
+            {"lobe_bits", p.pack.quantisation.lobe_bits},
+            {"tile_size", p.pack.tile_size}}}};
 }
 
 void ReadOptions(const Fields& o, TilePlan& p) {
@@ -181,7 +183,7 @@ void ReadOptions(const Fields& o, TilePlan& p) {
   r.jpeg_sigma_codes = f.Number("jpeg_sigma_codes");
 
   const Fields k = o.Object("pack");
-  k.OnlyKeys({"encoding", "height_bits", "normal_bits", "rho_bits", "lobe_bits"});
+  k.OnlyKeys({"encoding", "height_bits", "normal_bits", "rho_bits", "lobe_bits", "tile_size"});
   const std::string encoding = k.String("encoding");
   if (encoding != ToString(PackEncoding::kHalf) && encoding != ToString(PackEncoding::kQuantised))
     Fail(k.At("encoding") + " must be \"half\" or \"quantised\", got " + Show(encoding));
@@ -191,6 +193,11 @@ void ReadOptions(const Fields& o, TilePlan& p) {
   p.pack.quantisation.normal_bits = static_cast<int>(k.Integer("normal_bits", 0, 10));
   p.pack.quantisation.rho_bits = static_cast<int>(k.Integer("rho_bits", 0, 10));
   p.pack.quantisation.lobe_bits = static_cast<int>(k.Integer("lobe_bits", 0, 10));
+  // Plans written before tiled packs: a single-grid pack.
+  p.pack.tile_size = k.Has("tile_size") ? static_cast<int>(k.Integer("tile_size", 0, 4096)) : 0;
+  if (p.pack.tile_size != 0)
+    if (Status s = CheckPackTileSize(p.pack.tile_size); !s.ok())
+      Fail(k.At("tile_size") + ": " + s.message());
 }
 
 // The plan without its id: what the id is the digest of.

@@ -4,6 +4,7 @@
 
 #include "commands.h"
 #include "digitize/image_io.h"
+#include "digitize/pack_tiled.h"
 
 namespace digitize::cli {
 
@@ -48,6 +49,18 @@ void AddPackWriteFlags(CLI::App* c, PackWriteOptions& o, bool& quantised) {
       ->group("Pack");
   c->add_option("--lobe-bits", o.quantisation.lobe_bits, "Quantised: mantissa bits of cx, cy, k")
       ->capture_default_str()
+      ->group("Pack");
+  c->add_option("--pack-tile-size", o.tile_size,
+                "Write a tiled, multi-resolution pack (version 3): N x N tiles, every level "
+                "prefiltered down to 1 x 1, streamed with bounded memory (N a power of two in "
+                "64-4096; 256 suits a streaming viewer). 0: one grid (version 2)")
+      ->capture_default_str()
+      ->check([](const std::string& text) -> std::string {
+        const int n = std::atoi(text.c_str());
+        if (n == 0) return {};
+        const Status s = CheckPackTileSize(n);
+        return s.ok() ? std::string() : s.message();
+      })
       ->group("Pack");
 }
 

@@ -72,6 +72,11 @@ void AddInspectCommand(CLI::App& app, int& exit_code) {
         std::printf("  mantissa    height %d, normal %d, rho %d, lobe %d bits (of 10)\n",
                     s->quantisation.height_bits, s->quantisation.normal_bits,
                     s->quantisation.rho_bits, s->quantisation.lobe_bits);
+      if (s->tile_size > 0)
+        std::printf(
+            "  tiles       %d x %d texels, %zu levels (%d x %d down to 1 x 1, each "
+            "prefiltered from the one above)\n",
+            s->tile_size, s->tile_size, s->levels.size(), s->width, s->height);
       std::printf("  pitch       %.4g mm\n", s->pitch_mm);
       std::printf("  models     ");
       for (int m = 0; m < kReflectanceModelCount; ++m)

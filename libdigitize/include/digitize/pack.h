@@ -41,7 +41,9 @@
 namespace digitize {
 
 // 2: the reflectance model per texel (M's model term, digitize:models). Version 1 packs still read
-// (every texel Lafortune).
+// (every texel Lafortune). Version 3 (pack_tiled.h, kTiledPackVersion) is the tiled,
+// multi-resolution form, written when PackWriteOptions::tile_size > 0; every reader reads all
+// three.
 inline constexpr int kPackVersion = 2;
 inline constexpr const char* kPackFormatName = "digitize.pack";
 
@@ -100,6 +102,9 @@ const char* ToString(PackEncoding encoding);  // "half", "quantised"
 struct PackWriteOptions {
   PackEncoding encoding = PackEncoding::kHalf;
   PackQuantisation quantisation;  // kQuantised only
+  // 0: one grid (version 2). Else a tiled, multi-resolution pack (version 3, pack_tiled.h) of
+  // tile_size x tile_size tiles: a power of two in [64, 4096].
+  int tile_size = 0;
   Status Validate() const;
 };
 
@@ -107,6 +112,9 @@ struct PackWriteOptions {
 struct PackReadOptions {
   int64_t max_texels = int64_t{1} << 26;        // 8192 x 8192 (~4 GiB in memory as a Pack)
   int64_t max_header_bytes = int64_t{1} << 22;  // all part headers together
+  // A tiled pack (version 3) is read a tile at a time (TiledPackReader), so its level 0 may be
+  // larger: 65536 x 65536. ReadPack, which holds it whole, still applies max_texels.
+  int64_t max_tiled_texels = int64_t{1} << 32;
 };
 
 // What `digitize inspect` shows; from the header alone (no pixel is decoded).
@@ -126,6 +134,10 @@ struct PackSummary {
   PackProvenance provenance;
   uint64_t file_bytes = 0;
   int raw_bytes_per_texel = 0;  // uncompressed texel channels of the surface + reflectance parts
+  // Version 3 (pack_tiled.h): the tile size and every level's size (level 0 first); else 0 and
+  // empty.
+  int tile_size = 0;
+  std::vector<std::array<int, 2>> levels;
   double BytesPerTexel() const {
     return width > 0 && height > 0 ? double(file_bytes) / (double(width) * height) : 0.0;
   }
@@ -138,11 +150,13 @@ Result<Pack> AssemblePack(PreprocessedCanvas canvas, ReflectanceMaps maps,
 
 // Writes atomically (temporary file beside `path`, then rename). Refuses a pack that does not
 // Validate() or whose values do not fit in half (|v| > 65504), naming the map and texel.
+// options.tile_size > 0: a version 3 pack (WriteTiledPack, pack_tiled.h).
 Status WritePack(const std::filesystem::path& path, const Pack& pack,
                  const PackWriteOptions& options = {});
 
 // Reads and validates everything: format name, version, parts, channel sets, sizes (bounded by
 // options before any allocation), NaN/Inf, boxes, metadata. Errors name the file and the problem.
+// A version 3 pack: its level 0, every tile checked against its SHA-1.
 Result<Pack> ReadPack(const std::filesystem::path& path, const PackReadOptions& options = {});
 
 // Header only.
