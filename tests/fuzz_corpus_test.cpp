@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "digitize/pack.h"
+#include "digitize/pack_tiled.h"
 #include "digitize/photo_set.h"
 #include "digitize_viewer/gallery.h"
 #include "digitize_viewer/painting_setup.h"
@@ -215,7 +216,8 @@ TEST(FuzzCorpusTest, DeeplyNestedValueIsAnErrorNotAStackOverflow) {
 // The pack seeds. Not a test: run by hand when the pack format changes (the valid_ seeds then fail
 // PackSeedsKeepTheContract above), from the repository root:
 //   build/tests/fuzz_corpus_test --gtest_also_run_disabled_tests --gtest_filter='*WritePackSeeds'
-// Small on purpose (8x8 and 9x5 texels, 2-4 KB): libFuzzer mutates every byte of a seed.
+// Small on purpose (8x8 and 9x5 texels, 2-4 KB; the tiled one 70x9, 8 KB, the least that has two
+// tiles): libFuzzer mutates every byte of a seed.
 
 // An 8x8 (or any size) pack: a bump in the middle, an outside border, one relief box over the
 // bump's cell, reflectance varying per texel, every fit status; with `ggx`, the right half GGX
@@ -248,7 +250,7 @@ Pack TinyPack(int w, int h, bool with_box, bool ggx = false) {
         p.maps.SetGgx(x, y,
                       {gold ? Vec3f::Zero() : lp.rho_d,
                        gold ? Vec3f(1.0f, 0.78f, 0.34f) : Vec3f::Constant(0.04f),
-                       0.05f + 0.05f * float(x - w / 2)});
+                       std::min(0.3f, 0.05f + 0.05f * float(x - w / 2))});
       }
       p.maps.status(x, y) = static_cast<TexelFitStatus>((x + y) % kTexelFitStatusCount);
     }
@@ -318,6 +320,13 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   // The valid_v1_* seeds are packs of version 1 (before models), kept as they were written.
   ASSERT_TRUE(WritePack(dir / "valid_ggx_8x8_box.exr", TinyPack(8, 8, true, true)).ok());
   RewriteUncompressed(dir / "valid_ggx_8x8_box.exr", dir / "valid_uncompressed_ggx_8x8_box.exr");
+  {  // Version 3: two 64-texel tiles at level 0, seven levels down to 1 x 1, the checksums part.
+    PackWriteOptions tiled;
+    tiled.tile_size = kMinPackTileSize;
+    const Status written =
+        WritePack(dir / "valid_tiled_70x9.exr", TinyPack(70, 9, true, true), tiled);
+    ASSERT_TRUE(written.ok()) << written.message();
+  }
   ASSERT_EQ(forge::ForgePack(dir / "valid_uncompressed_ggx_8x8_box.exr",
                              dir / "bad_unknown_model.exr", {}, {},
                              [](int part, const OIIO::ImageSpec& spec, std::vector<char>& px) {
@@ -361,8 +370,9 @@ TEST(FuzzCorpusTest, DISABLED_WritePackSeeds) {
   fs::create_directories(viewer_dir);
   for (const char* name :
        {"valid_half_8x8_box.exr", "valid_quantised_9x5.exr", "valid_uncompressed_8x8_box.exr",
-        "valid_ggx_8x8_box.exr", "bad_unknown_model.exr", "bad_forged_pitch_1e308.exr",
-        "bad_forged_max_height.exr", "bad_forged_translation.exr", "bad_truncated.exr"})
+        "valid_ggx_8x8_box.exr", "valid_tiled_70x9.exr", "bad_unknown_model.exr",
+        "bad_forged_pitch_1e308.exr", "bad_forged_max_height.exr", "bad_forged_translation.exr",
+        "bad_truncated.exr"})
     fs::copy_file(dir / name, viewer_dir / name, fs::copy_options::overwrite_existing);
   {
     Pack line = TinyPack(1, 6, false);
