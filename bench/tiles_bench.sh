@@ -7,6 +7,9 @@
 # new one under /tmp, removed after), CSV (default docs/bench_tiles.csv).
 # Each tile runs as its own process (`tiles run --index I`), as a Slurm array task would, so its
 # peak RSS is the job's. The merged maps are compared with the untiled fit's (idiff -fail 0).
+# A second plan with a tiled pack (PACK_TILE, default 256; 0 skips it) measures the streamed merge
+# (no whole-canvas maps); its pack is checked with `digitize verify` (tests/tiles_test.cpp asserts
+# it equals `digitize pack --pack-tile-size` of the untiled fit, tile for tile).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 root=$PWD
@@ -16,6 +19,7 @@ sizes=("$@")
 tile=${TILE:-512}
 cache=${CACHE_MB:-256}
 lights=${LIGHTS:-16}
+pack_tile=${PACK_TILE:-256}
 csv=${CSV:-$root/docs/bench_tiles.csv}
 own_work=0
 if [ -z "${WORK:-}" ]; then
@@ -74,6 +78,16 @@ for n in "${sizes[@]}"; do
     idiff -fail 0 -warn 0 -a "$f" "$d/plan.tiles/fit/$(basename "$f")" > /dev/null || same=no
   done
   row tiles_merge "$s" "$kb" "$same"
+  if [ "$pack_tile" -gt 0 ]; then
+    "$bin" tiles plan --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
+      --plan "$d/plan_tiled.json" --out "$d/tiled_$pack_tile.pack.exr" --tile-size "$tile" \
+      --pack-tile-size "$pack_tile" > "$WORK/last.log" 2>&1
+    "$bin" tiles run "$d/plan_tiled.json" --all --cache-mb "$cache" > "$WORK/last.log" 2>&1
+    read -r s kb < <(measure "$bin" tiles merge "$d/plan_tiled.json")
+    verified=no
+    "$bin" verify "$d/tiled_$pack_tile.pack.exr" > /dev/null 2>&1 && verified=verified
+    row "tiles_merge_streamed_$pack_tile" "$s" "$kb" "$verified"
+  fi
   rm -rf "$d"
 done
 echo "wrote $csv"

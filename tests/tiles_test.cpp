@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "digitize/output_dir.h"
+#include "digitize/pack_tiled.h"
 #include "digitize/pipeline.h"
 #include "digitize/reflectance_fit.h"
 #include "digitize/tile_jobs.h"
@@ -275,6 +276,79 @@ TEST_F(TilesCli, PlanRunMergeGivesTheFitFolderOfDigitizeFit) {
     EXPECT_GT(std::stoi((*it)[3]), 0) << (*it)[0];
   }
   EXPECT_EQ(jobs, 12) << log;
+}
+
+// A plan with a tiled pack streams its merge: no whole-canvas map is assembled (fit/ keeps the
+// summed report alone) and every tile of every level is, bit for bit, the tile `digitize pack
+// --pack-tile-size` writes from the untiled fit; a tile whose maps went wrong is refused by name
+// and leaves the pack as it was.
+TEST_F(TilesCli, ATiledPackStreamsTheMergeAndEqualsThePackOfTheWholeFit) {
+  ASSERT_EQ(MakePlan("--pack-tile-size 64").exit_code, 0);
+  CliRun run = Cli("tiles run " + PlanFile() + " --all");
+  ASSERT_EQ(run.exit_code, 0) << run.text;
+  CliRun merge = Cli("tiles merge " + PlanFile());
+  ASSERT_EQ(merge.exit_code, 0) << merge.text;
+  const fs::path work = dir_ / "painting.plan.tiles";
+  EXPECT_TRUE(fs::is_regular_file(work / "fit/report.json"));
+  EXPECT_FALSE(fs::exists(work / "fit/rho_d.exr")) << "the merge assembled the whole maps";
+  CliRun status = Cli("tiles status " + PlanFile());
+  EXPECT_EQ(status.exit_code, 0) << status.text;
+  EXPECT_NE(status.text.find("merged"), std::string::npos) << status.text;
+
+  const fs::path whole = dir_ / "whole.pack.exr";
+  CliRun pack = Cli("pack --canvas " + Canvas() + " --fit " + (*data_ / "fit").string() +
+                    " --out " + whole.string() + " --pack-tile-size 64");
+  ASSERT_EQ(pack.exit_code, 0) << pack.text;
+  auto a = TiledPackReader::Open(Pack());
+  auto b = TiledPackReader::Open(whole);
+  ASSERT_TRUE(a.ok()) << a.error().message;
+  ASSERT_TRUE(b.ok()) << b.error().message;
+  const PackSummary &sa = (*a)->summary(), &sb = (*b)->summary();
+  ASSERT_EQ(sa.levels, sb.levels);
+  ASSERT_EQ(sa.levels.size(), 9u);  // 200 x 149 down to 1 x 1
+  EXPECT_EQ(sa.texels_by_model, sb.texels_by_model);
+  EXPECT_EQ(sa.box_count, sb.box_count);
+  EXPECT_EQ((*a)->boxes().size(), (*b)->boxes().size());
+  EXPECT_EQ(sa.delta0_mm, sb.delta0_mm);
+  EXPECT_EQ(sa.pitch_mm, sb.pitch_mm);
+  int64_t compared = 0;
+  for (size_t l = 0; l < sa.levels.size(); ++l)
+    for (int ty = 0; ty * 64 < sa.levels[l][1]; ++ty)
+      for (int tx = 0; tx * 64 < sa.levels[l][0]; ++tx) {
+        auto ta = (*a)->ReadTile(static_cast<int>(l), tx, ty);
+        auto tb = (*b)->ReadTile(static_cast<int>(l), tx, ty);
+        ASSERT_TRUE(ta.ok()) << ta.error().message;
+        ASSERT_TRUE(tb.ok()) << tb.error().message;
+        const PackLevel &x = ta->texels, &y = tb->texels;
+        const std::string where = "level " + std::to_string(l) + " tile " + std::to_string(tx) +
+                                  ", " + std::to_string(ty);
+        ASSERT_EQ(x.field.height_mm.data, y.field.height_mm.data) << where;
+        ASSERT_EQ(x.field.state.data, y.field.state.data) << where;
+        ASSERT_EQ(x.normals.data, y.normals.data) << where;
+        ASSERT_EQ(x.maps.rho_d.data, y.maps.rho_d.data) << where;
+        ASSERT_EQ(x.maps.rho_s.data, y.maps.rho_s.data) << where;
+        ASSERT_EQ(x.maps.lobe.data, y.maps.lobe.data) << where;
+        ASSERT_EQ(x.maps.model.data, y.maps.model.data) << where;
+        ASSERT_EQ(x.maps.status.data, y.maps.status.data) << where;
+        compared += static_cast<int64_t>(x.field.height_mm.size());
+      }
+  EXPECT_GT(compared, 200 * 149);  // level 0 and every coarser level
+  // The provenance names the tiles' files, as the untiled pack names the fit folder's.
+  bool names_a_tile = false;
+  for (const PackInput& in : sa.provenance.inputs)
+    names_a_tile |= in.name == "tile_00003/rho_d.exr" && in.sha1.size() == 40;
+  EXPECT_TRUE(names_a_tile);
+  CliRun verify = Cli("verify " + Pack());
+  EXPECT_EQ(verify.exit_code, 0) << verify.text;
+
+  // Tile 11 (50 x 49, the last row) given tile 0's 50 x 50 maps: refused by name, pack unchanged.
+  const std::string before = ReadFileBytes(Pack());
+  fs::copy_file(work / "tile_00000/rho_d.exr", work / "tile_00011/rho_d.exr",
+                fs::copy_options::overwrite_existing);
+  CliRun bad = Cli("tiles merge " + PlanFile());
+  EXPECT_EQ(bad.exit_code, 1) << bad.text;
+  EXPECT_NE(bad.text.find("tile_00011"), std::string::npos) << bad.text;
+  EXPECT_EQ(ReadFileBytes(Pack()), before);
 }
 
 // Killed (SIGKILL: no clean-up) while loading, after its first tile, half-way and while

@@ -3,12 +3,15 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
 #include "digitize/output_dir.h"
+#include "digitize/pack_tiled.h"
 #include "digitize/pipeline.h"
 #include "digitize/preprocess.h"
+#include "digitize/provenance.h"
 #include "json_fields.h"
 
 namespace digitize {
@@ -448,6 +451,104 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
   return report;
 }
 
+namespace {
+
+// The merge reads the canvas by rows of the whole width; a bounded cache keeps its memory
+// independent of the canvas's height.
+constexpr size_t kMergeCacheMb = 512;
+
+// Tile `index`'s maps, checked against the plan's rectangle.
+Result<ReflectanceMaps> ReadTileMaps(const TilePlan& plan, size_t index) {
+  const fs::path dir = plan.TileFolder(index);
+  auto maps = ReadReflectanceMaps(dir);
+  if (!maps.ok()) return maps.error();
+  const TexelRect& t = plan.tiles[index];
+  if (maps->width() != t.width || maps->height() != t.height)
+    return Error{dir.string() + ": maps are " + std::to_string(maps->width()) + " x " +
+                 std::to_string(maps->height()) + ", the tile " + std::to_string(t.width) + " x " +
+                 std::to_string(t.height)};
+  return maps;
+}
+
+// Texel (x, y) of `from` into (tx, ty) of `to`.
+void CopyTexel(const ReflectanceMaps& from, int x, int y, ReflectanceMaps& to, int tx, int ty) {
+  to.rho_d(tx, ty) = from.rho_d(x, y);
+  to.rho_s(tx, ty) = from.rho_s(x, y);
+  to.lobe(tx, ty) = from.lobe(x, y);
+  to.fit_error(tx, ty) = from.fit_error(x, y);
+  to.status(tx, ty) = from.status(x, y);
+  to.model(tx, ty) = from.model(x, y);
+}
+
+// The tiled pack of a plan, its level 0 streamed from the canvas folder and the tile folders a
+// band of rows at a time (WriteTiledPack): the canvas is read by window through a bounded cache,
+// and only the tiles a band crosses are held, so the merge's memory follows the canvas's width,
+// not its texels. The provenance hashes the tile folders' files (there is no whole-canvas map).
+Result<PackSummary> StreamTilesToPack(const TilePlan& plan,
+                                      const std::array<int64_t, kReflectanceModelCount>& models,
+                                      const ProgressCallback& progress) {
+  const std::string file = plan.out.string();
+  if (Status s = plan.pack.Validate(); !s.ok()) return Error{file + ": " + s.message()};
+  if (Status s = CheckOutputPath(plan.out, {plan.canvas, plan.work}); !s.ok())
+    return Error{s.message()};
+  ImageRegionReader reader(kMergeCacheMb);
+  auto frame = ReadPreprocessWindow(plan.canvas, 0, 0, 1, 1, reader);
+  if (!frame.ok()) return frame.error();
+  PackHeader header;
+  header.width = plan.canvas_width;
+  header.height = plan.canvas_height;
+  header.pitch_mm = frame->field.pitch_mm;
+  header.delta0_mm = frame->delta0_mm;
+  header.max_height_mm = frame->max_height_mm;
+  header.cell_px = frame->cell_px;
+  header.boxes = std::move(frame->boxes);
+  header.canvas_from_scan = frame->canvas_from_scan;
+  header.texels_by_model = models;
+  auto provenance = ProvenanceFromOutputs(plan.canvas, plan.FitFolder(), plan.pack);
+  if (!provenance.ok()) return provenance.error();
+  for (size_t i = 0; i < plan.tiles.size(); ++i) {
+    std::vector<fs::path> files;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(plan.TileFolder(i), ec))
+      if (e.is_regular_file() && e.path().filename().string().front() != '.')
+        files.push_back(e.path());
+    if (ec) return Error{plan.TileFolder(i).string() + ": cannot list: " + ec.message()};
+    std::sort(files.begin(), files.end());
+    if (Status s = AddProvenanceInputs(*provenance, files, plan.work); !s.ok())
+      return Error{s.message()};
+  }
+  header.provenance = std::move(provenance).value();
+
+  std::map<size_t, ReflectanceMaps> open;  // the tiles the band crosses
+  const int w = plan.canvas_width, h = plan.canvas_height;
+  const PackBandSource band = [&](int y0, int rows) -> Result<PackLevel> {
+    auto canvas = ReadPreprocessWindow(plan.canvas, 0, y0, w, rows, reader);
+    if (!canvas.ok()) return canvas.error();
+    ReflectanceMaps maps = ReflectanceMaps::Zeros(w, rows);
+    for (size_t i = 0; i < plan.tiles.size(); ++i) {
+      const TexelRect& t = plan.tiles[i];
+      const int top = std::max(t.y, y0), bottom = std::min(t.y + t.height, y0 + rows);
+      if (top >= bottom) continue;
+      auto it = open.find(i);
+      if (it == open.end()) {
+        auto tile = ReadTileMaps(plan, i);
+        if (!tile.ok()) return tile.error();
+        it = open.emplace(i, std::move(tile).value()).first;
+      }
+      for (int y = top; y < bottom; ++y)
+        for (int x = 0; x < t.width; ++x) CopyTexel(it->second, x, y - t.y, maps, t.x + x, y - y0);
+      if (t.y + t.height <= y0 + rows) open.erase(it);
+    }
+    ReportProgress(progress, "merge", 0.3 + 0.7 * static_cast<double>(y0 + rows) / h);
+    return BaseLevel(canvas->field, canvas->normals, maps);
+  };
+  if (Status s = WriteTiledPack(plan.out, header, plan.pack, band); !s.ok())
+    return Error{s.message()};
+  return InspectPack(plan.out);
+}
+
+}  // namespace
+
 Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback& progress) {
   auto status = StatusOfTiles(plan);
   if (!status.ok()) return status.error();
@@ -457,20 +558,17 @@ Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback&
                  " tiles are not done (tiles: " + IndexList(status->pending) +
                  "); run them first (`digitize tiles run PLAN --all`)"};
   if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
+  // A tiled pack streams from the tile folders; a single-grid one is written from whole maps.
+  const bool streamed = plan.pack.tile_size > 0;
   TileMergeReport merged;
   ReflectanceFitResult whole;
-  whole.maps = ReflectanceMaps::Zeros(plan.canvas_width, plan.canvas_height);
+  if (!streamed) whole.maps = ReflectanceMaps::Zeros(plan.canvas_width, plan.canvas_height);
+  std::array<int64_t, kReflectanceModelCount> models{};
   ReportProgress(progress, "merge", 0.0);
   for (size_t i = 0; i < plan.tiles.size(); ++i) {
-    const fs::path dir = plan.TileFolder(i);
-    auto maps = ReadReflectanceMaps(dir);
+    auto maps = ReadTileMaps(plan, i);
     if (!maps.ok()) return maps.error();
-    const TexelRect& t = plan.tiles[i];
-    if (maps->width() != t.width || maps->height() != t.height)
-      return Error{dir.string() + ": maps are " + std::to_string(maps->width()) + " x " +
-                   std::to_string(maps->height()) + ", the tile " + std::to_string(t.width) +
-                   " x " + std::to_string(t.height)};
-    auto part = ReadTileReport(dir / "report.json");
+    auto part = ReadTileReport(plan.TileFolder(i) / "report.json");
     if (!part.ok()) return part.error();
     if (i == 0) {
       whole.report.photos = part->photos;
@@ -479,34 +577,33 @@ Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback&
       whole.report.quantisation = part->quantisation;
     }
     AddTileReport(whole.report, *part);
-    ReflectanceMaps& m = whole.maps;
-    for (int y = 0; y < t.height; ++y) {
-      for (int x = 0; x < t.width; ++x) {
-        const int cx = t.x + x, cy = t.y + y;
-        m.rho_d(cx, cy) = maps->rho_d(x, y);
-        m.rho_s(cx, cy) = maps->rho_s(x, y);
-        m.lobe(cx, cy) = maps->lobe(x, y);
-        m.fit_error(cx, cy) = maps->fit_error(x, y);
-        m.status(cx, cy) = maps->status(x, y);
-        m.model(cx, cy) = maps->model(x, y);
-      }
+    const TexelRect& t = plan.tiles[i];
+    if (streamed) {
+      for (const ReflectanceModel m : maps->model.data) ++models[static_cast<size_t>(m)];
+    } else {
+      for (int y = 0; y < t.height; ++y)
+        for (int x = 0; x < t.width; ++x) CopyTexel(*maps, x, y, whole.maps, t.x + x, t.y + y);
     }
     ReportProgress(progress, "merge",
-                   0.8 * static_cast<double>(i + 1) / static_cast<double>(plan.tiles.size()));
+                   (streamed ? 0.3 : 0.8) * static_cast<double>(i + 1) /
+                       static_cast<double>(plan.tiles.size()));
   }
   whole.report.fit.method = plan.fit.fit.method;
   whole.report.fit.seconds = whole.report.seconds_fit;
   const FolderOutput output{"tiles merge", "fit", {plan.canvas, plan.photos}};
   const std::vector<std::string> inputs = PlanInputs(plan);
-  if (Status s = WriteDirectoryAtomically(plan.FitFolder(), output,
-                                          [&](const fs::path& dir) {
-                                            return WriteReflectanceOutputs(dir, whole, plan.fit,
-                                                                           inputs);
-                                          });
+  if (Status s = WriteDirectoryAtomically(
+          plan.FitFolder(), output,
+          [&](const fs::path& dir) {
+            if (!streamed) return WriteReflectanceOutputs(dir, whole, plan.fit, inputs);
+            return WriteTextFile(dir / "report.json",
+                                 ReflectanceReportJson(whole, plan.fit, inputs));
+          });
       !s.ok())
     return Error{s.message()};
-  ReportProgress(progress, "merge", 0.9);
-  auto pack = PackFromFolders(plan.canvas, plan.FitFolder(), plan.out, plan.pack);
+  ReportProgress(progress, "merge", streamed ? 0.3 : 0.9);
+  auto pack = streamed ? StreamTilesToPack(plan, models, progress)
+                       : PackFromFolders(plan.canvas, plan.FitFolder(), plan.out, plan.pack);
   if (!pack.ok()) return pack.error();
   merged.fit = std::move(whole.report);
   merged.pack = *pack;

@@ -10,7 +10,7 @@
 //                       tile's texels, and tile.json (the plan id, the index, the rectangle);
 //                       written atomically (WriteDirectoryAtomically), so a tile is either there
 //                       whole or not at all, whenever the job is killed
-//   fit/                the merged fit folder
+//   fit/                the merged fit folder (report.json alone when the pack is tiled)
 //   run.log             one line per tile fitted, and per merge
 //   slurm/              tiles.sbatch, merge.sbatch, submit.sh (WriteSlurmScripts)
 //   logs/               the Slurm jobs' output (tile_<index>.log, merge.log)
@@ -72,9 +72,15 @@ struct TileMergeReport {
   PackSummary pack;          // of the written pack
 };
 
-// Every tile done (else an error naming how many are pending and the first of them): their maps
-// assembled into the canvas's, written as the fit folder work/fit (report.json with the summed
-// report), then the pack at plan.out (PackFromFolders: provenance, atomic, never over an input).
+// Every tile done (else an error naming how many are pending and the first of them): their
+// reports summed into work/fit/report.json, then the pack at plan.out (provenance, atomic, never
+// over an input). A single-grid pack (plan.pack.tile_size 0) is written from the whole maps,
+// assembled into work/fit as `digitize fit` writes them (PackFromFolders). A tiled pack streams:
+// each tile's maps are read and checked once to count its models, then level 0 is fed to
+// WriteTiledPack a band of rows at a time from the canvas folder (read by window) and the tiles the
+// band crosses, so no whole-canvas map is ever held; work/fit holds report.json alone and the
+// pack's provenance hashes every tile folder's files. Both give the same texels as `digitize pack`
+// of an untiled fit with the same options.
 Result<TileMergeReport> MergeTiles(const TilePlan& plan,
                                    const ProgressCallback& progress = nullptr);
 
