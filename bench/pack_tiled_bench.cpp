@@ -103,9 +103,12 @@ double MaxError(const PackLevel& read, int x0, int y0, int n) {
 
 int main(int argc, char** argv) {
   int n = 0, tile = 256;
+  bool keep = false;  // --keep 1: leave the pack (viewer_stream_bench streams it)
   std::string out = "/tmp/pack_tiled_bench.pack.exr";
   for (int i = 1; i + 1 < argc; i += 2) {
-    if (!std::strcmp(argv[i], "--size"))
+    if (!std::strcmp(argv[i], "--keep"))
+      keep = std::atoi(argv[i + 1]) != 0;
+    else if (!std::strcmp(argv[i], "--size"))
       n = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--tile"))
       tile = std::atoi(argv[i + 1]);
@@ -113,8 +116,9 @@ int main(int argc, char** argv) {
       out = argv[i + 1];
   }
   if (n < 2) {
-    std::fprintf(stderr,
-                 "usage: pack_tiled_bench --size N [--tile T (0: single grid)] [--out F]\n");
+    std::fprintf(
+        stderr,
+        "usage: pack_tiled_bench --size N [--tile T (0: single grid)] [--out F] [--keep 1]\n");
     return 2;
   }
   const PackHeader header = Header(n);
@@ -164,6 +168,6 @@ int main(int argc, char** argv) {
   // size, tile, levels, write s, peak RSS after writing, file MB, max relative error read back
   std::printf("%d,%d,%d,%.2f,%.0f,%.1f,%.2e\n", n, tile, levels, write_s, write_rss,
               fs::file_size(out) / 1e6, error);
-  fs::remove(out);
+  if (!keep) fs::remove(out);
   return 0;
 }

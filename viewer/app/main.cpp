@@ -54,8 +54,8 @@ struct Walker {  // walk-through camera: position, yaw / pitch (rad), world Z up
 // max_frames > 0: close after that many frames, first writing the window (panel included) to
 // window_shot when given -- how the windowed path is checked under xvfb-run.
 int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
-              std::vector<std::string> errors, RenderOptions options, int max_frames,
-              const std::string& window_shot) {
+              const std::vector<std::string>& streamed, std::vector<std::string> errors,
+              RenderOptions options, int max_frames, const std::string& window_shot) {
   if (!glfwInit()) {
     std::fprintf(stderr, "digitize-viewer: GLFW cannot initialise (no display?)\n");
     return 1;
@@ -86,12 +86,31 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     return 1;
   }
   // A pack the viewer refuses is listed (stderr and the panel); the others hang without a gap.
-  GalleryScene scene = HangPaintings(packs);
+  // Tiled packs stream: each frame uploads the tiles its view needs (pyramid_stream.h).
+  std::vector<std::unique_ptr<PyramidStream>> streams;
+  std::vector<std::string> stream_names, refused;
+  std::vector<Eigen::Vector2d> stream_sizes;
+  for (const std::string& p : streamed) {
+    auto stream = PyramidStream::Open(p);
+    if (!stream) {
+      refused.push_back(stream.error().message);
+      continue;
+    }
+    stream_sizes.emplace_back((*stream)->width_mm(), (*stream)->height_mm());
+    stream_names.push_back(p);
+    streams.push_back(std::move(stream).value());
+  }
+  GalleryScene scene = HangPaintings(packs, {}, stream_sizes);
   Gallery& g = scene.gallery;
-  std::vector<std::string> refused = scene.failed;
+  refused.insert(refused.end(), scene.failed.begin(), scene.failed.end());
   for (size_t k = 0; k < scene.hung.size(); ++k) {
     const auto& [name, pack] = packs[scene.hung[k]];
     auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
+    if (!added) refused.push_back(added.error().message);
+  }
+  for (size_t j = 0; j < streams.size(); ++j) {
+    auto added = (*renderer)->AddStreamedPainting(std::move(streams[j]), stream_names[j],
+                                                  g.world_from_canvas[scene.hung.size() + j]);
     if (!added) refused.push_back(added.error().message);
   }
   for (const std::string& e : refused) std::fprintf(stderr, "digitize-viewer: %s\n", e.c_str());
@@ -191,6 +210,10 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
         window_options.exposure = exposure_ui;
         glEnable(GL_FRAMEBUFFER_SRGB);
         stats = (*renderer)->Draw(cam, g.lights, window_options);
+        for (const std::string& e : stats.stream_errors) {  // a tile that failed its checks
+          std::fprintf(stderr, "digitize-viewer: %s\n", e.c_str());
+          errors.push_back(e);
+        }
         glDisable(GL_FRAMEBUFFER_SRGB);
       }
     }
@@ -208,6 +231,10 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
     ImGui::Text("%.1f ms/frame (%.0f Hz)", frame_ms, 1000.0 / std::max(frame_ms, 1e-3));
     ImGui::Text("boxes drawn %d of %d (%d blended)", stats.boxes_drawn, stats.boxes_total,
                 stats.boxes_blended);
+    if (stats.tiles_needed > 0)
+      ImGui::Text("streamed tiles: %d drawn, %d of %d needed loading, %.0f MB on the GPU",
+                  stats.tiles_drawn, stats.tiles_missing, stats.tiles_needed,
+                  stats.stream_bytes / 1048576.0);
     const char* names[] = {"mesh",   "relief everywhere", "bump",
                            "hybrid", "hybrid + adaptive", "screen-space error"};
     ImGui::Combo("technique", &technique, names, 6);
@@ -316,6 +343,10 @@ int main(int argc, char** argv) {
   int window_frames = 0;
   app.add_option("packs", paths, "texture packs (.pack.exr)");
   app.add_flag("--synthetic", synthetic, "also hang a synthetic painting (ground-truth pack)");
+  bool no_stream = false;
+  app.add_flag("--no-stream", no_stream,
+               "read tiled packs whole (relief boxes, shadows) instead of streaming their tiles; "
+               "only for packs of at most 8192 x 8192 texels");
   app.add_option("--technique", technique, "mesh, relief, bump, hybrid, adaptive, screen-error");
   app.add_option("--screenshot", screenshot,
                  "render headless into this image (.png, .jpg, .tif, .exr) and exit");
@@ -408,8 +439,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::vector<std::pair<std::string, Pack>> packs;
-  std::vector<std::string> errors;
+  std::vector<std::string> errors, streamed;
   for (const std::string& p : paths) {
+    if (!no_stream && IsTiledPack(p)) {  // opened by the renderer's stream, tile by tile
+      streamed.push_back(p);
+      continue;
+    }
     auto pack = LoadPackForViewer(p);
     if (pack) {
       packs.emplace_back(p, std::move(*pack));
@@ -426,7 +461,7 @@ int main(int argc, char** argv) {
     tpo.relief.delta0_fraction = 0.10;
     packs.emplace_back("synthetic", synth::MakeTruthPack(synth::MakePainting(po), tpo));
   }
-  if (packs.empty()) {  // an empty room would hide that nothing could be read
+  if (packs.empty() && streamed.empty()) {  // an empty room would hide that nothing was read
     std::fprintf(stderr,
                  "digitize-viewer: none of the %zu pack(s) could be loaded; nothing shown "
                  "or written\n",
@@ -447,6 +482,7 @@ int main(int argc, char** argv) {
     shot.render = options;
     shot.exposure = exposure;
     shot.close_up = close_up;
+    shot.streamed.assign(streamed.begin(), streamed.end());
     shot.inputs.assign(paths.begin(), paths.end());
     if (!camera_path.empty()) shot.inputs.emplace_back(camera_path);
     if (std::sscanf(size.c_str(), "%dx%d", &shot.width, &shot.height) != 2 || shot.width <= 0 ||
@@ -475,7 +511,13 @@ int main(int argc, char** argv) {
       shot.inputs.emplace_back(video);  // never a screenshot onto it
     }
     std::vector<ViewCamera> path;
-    if (tour > 0) path = GalleryTour(HangPaintings(packs).gallery, tour, shot.width, shot.height);
+    if (tour > 0) {
+      std::vector<Eigen::Vector2d> sizes;
+      for (const std::string& p : streamed)
+        if (auto s = InspectPack(p); s.ok())
+          sizes.emplace_back(s->width * s->pitch_mm, s->height * s->pitch_mm);
+      path = GalleryTour(HangPaintings(packs, {}, sizes).gallery, tour, shot.width, shot.height);
+    }
     if (!camera_path.empty()) {
       auto p = ReadCameraPath(camera_path);
       if (!p) {
@@ -497,8 +539,8 @@ int main(int argc, char** argv) {
     if (frames > 1)
       std::printf(" .. %s (%zu images)", ScreenshotPath(screenshot, frames - 1, frames).c_str(),
                   frames);
-    std::printf(" (%zu painting(s), %zu failed to load)\n", packs.size() - (errors.size() - loaded),
-                errors.size());
+    std::printf(" (%zu painting(s), %zu failed to load)\n",
+                packs.size() + streamed.size() - (errors.size() - loaded), errors.size());
     if (!video.empty()) {
       if (Status v = WriteVideo(screenshot, frames, video); !v.ok()) {
         std::fprintf(stderr, "digitize-viewer: %s\n", v.message().c_str());
@@ -508,5 +550,5 @@ int main(int argc, char** argv) {
     }
     return errors.empty() ? 0 : 1;
   }
-  return RunWindow(packs, errors, options, window_frames, window_shot);
+  return RunWindow(packs, streamed, errors, options, window_frames, window_shot);
 }

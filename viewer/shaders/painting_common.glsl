@@ -42,9 +42,19 @@ uniform vec3 u_cam_down;
 uniform vec3 u_cam_forward;
 const float kPi = 3.14159265358979323846;
 
+// A streamed tile (pyramid_stream.h): the textures hold u_texels texels of a pyramid level from
+// texel u_tile_origin of that level's grid, u_pitch_mm the level's texel; u_size_mm stays the
+// canvas's.
+uniform int u_streamed;
+uniform vec2 u_tile_origin;
+
 // Canvas XY (mm) -> texture coordinates: texel (x, y) centre at X = (x + 0.5) pitch,
 // Y = (h - y - 0.5) pitch (height_field.h), row 0 uploaded first.
-vec2 UvOf(vec2 xy) { return vec2(xy.x / u_size_mm.x, 1.0 - xy.y / u_size_mm.y); }
+vec2 UvOf(vec2 xy) {
+  if (u_streamed != 0)
+    return (vec2(xy.x, u_size_mm.y - xy.y) / u_pitch_mm - u_tile_origin) / vec2(u_texels);
+  return vec2(xy.x / u_size_mm.x, 1.0 - xy.y / u_size_mm.y);
+}
 float HeightAt(vec2 xy) { return textureLod(u_surface, UvOf(xy), 0.0).w; }
 
 // Whether the relief blocks the light seen from surface point p along unit direction lw (canvas

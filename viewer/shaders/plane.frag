@@ -36,7 +36,11 @@ void main() {
     vec3 a = v_pos;
     vec3 b = u_eye + d * max(tfar, tnear);
     float footprint = FootprintTexels(a, b);
-    if (a.z <= HeightAt(a.xy) || footprint <= u_search_min_texels) {
+    // A streamed tile's slab is the tile's own, from its lowest to its highest texel: a ray that
+    // crosses it within a texel leaves through a side into the next tile, which goes on from
+    // there, so it is searched like any other (fixed-point steps from the slab's top would land
+    // beyond the tile).
+    if (a.z <= HeightAt(a.xy) || (footprint <= u_search_min_texels && u_streamed == 0)) {
       // Relief above the plane here (a box's, not drawn), or a ray so steep that it crosses the
       // slab within a texel or so (face views): the fixed-point steps, as without the search
       // (they also move the point back towards the eye where the relief is above the plane).

@@ -102,20 +102,39 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   if (!context) return context.error();
   auto renderer = Renderer::Create();
   if (!renderer) return renderer.error();
-  const GalleryScene scene = HangPaintings(packs);
+  std::vector<std::unique_ptr<PyramidStream>> streams;
+  std::vector<std::string> stream_names;
+  std::vector<Eigen::Vector2d> stream_sizes;
+  std::vector<std::string> refused;
+  for (const std::filesystem::path& p : options.streamed) {
+    auto stream = PyramidStream::Open(p, options.stream);
+    if (!stream) {
+      refused.push_back(stream.error().message);
+      continue;
+    }
+    stream_sizes.emplace_back((*stream)->width_mm(), (*stream)->height_mm());
+    stream_names.push_back(p.string());
+    streams.push_back(std::move(stream).value());
+  }
+  const GalleryScene scene = HangPaintings(packs, {}, stream_sizes);
   const Gallery& g = scene.gallery;
-  std::vector<std::string> refused = scene.failed;
+  refused.insert(refused.end(), scene.failed.begin(), scene.failed.end());
   for (size_t k = 0; k < scene.hung.size(); ++k) {
     const auto& [name, pack] = packs[scene.hung[k]];
     auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
+    if (!added) refused.push_back(added.error().message);
+  }
+  for (size_t j = 0; j < streams.size(); ++j) {
+    auto added = (*renderer)->AddStreamedPainting(std::move(streams[j]), stream_names[j],
+                                                  g.world_from_canvas[scene.hung.size() + j]);
     if (!added) refused.push_back(added.error().message);
   }
   if (!refused.empty()) {
     if (failed == nullptr) return Error{refused.front()};
     failed->insert(failed->end(), refused.begin(), refused.end());
     // An empty room would hide that nothing could be shown.
-    if (refused.size() == packs.size())
-      return Error{"none of the " + std::to_string(packs.size()) +
+    if (refused.size() == packs.size() + options.streamed.size())
+      return Error{"none of the " + std::to_string(packs.size() + options.streamed.size()) +
                    " painting(s) could be hung; nothing written"};
   }
   (*renderer)->SetRoom(g.room);
@@ -146,6 +165,7 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   RenderOptions render = options.render;
   render.exposure = options.exposure;  // the styles' tone is the screenshot's
   for (size_t i = 0; i < cameras.size(); ++i) {
+    if (!streams.empty()) (void)(*renderer)->SettleStreams(cameras[i], options.settle_seconds);
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, render);
     if (Status s = WriteRgb8(outs[i], ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
   }

@@ -214,4 +214,9 @@ std::vector<ViewCamera> GalleryTour(const Gallery& g, int frames, int width, int
 
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path) { return ReadPack(path); }
 
+bool IsTiledPack(const std::filesystem::path& path) {
+  auto summary = InspectPack(path);
+  return summary.ok() && summary->tile_size > 0;
+}
+
 }  // namespace digitize::viewer

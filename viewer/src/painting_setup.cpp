@@ -66,7 +66,8 @@ std::vector<size_t> ShadingSource(const Pack& pack) {
 }
 
 GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& packs,
-                           const GalleryOptions& options) {
+                           const GalleryOptions& options,
+                           const std::vector<Eigen::Vector2d>& streamed_sizes) {
   GalleryScene scene;
   std::vector<Eigen::Vector2d> sizes;
   for (size_t i = 0; i < packs.size(); ++i) {
@@ -78,6 +79,7 @@ GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& pack
     scene.hung.push_back(i);
     sizes.emplace_back(setup->width_mm, setup->height_mm);
   }
+  sizes.insert(sizes.end(), streamed_sizes.begin(), streamed_sizes.end());
   scene.gallery = MakeGallery(sizes, options);
   return scene;
 }

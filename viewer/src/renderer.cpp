@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <string>
 
 #include "digitize_viewer/painterly_strokes.h"
@@ -142,10 +143,11 @@ std::vector<float> CubeEdges() {  // 12 edges as 24 line vertices (corner, zero 
 
 std::string Size(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
-GLuint MakeTexture(int w, int h, const std::vector<float>& rgba, bool linear) {
+GLuint MakeTexture(int w, int h, const std::vector<float>& rgba, bool linear,
+                   GLenum format = GL_RGBA32F) {
   GLuint t = 0;
   glCreateTextures(GL_TEXTURE_2D, 1, &t);
-  glTextureStorage2D(t, 1, GL_RGBA32F, w, h);
+  glTextureStorage2D(t, 1, format, w, h);
   glTextureSubImage2D(t, 0, 0, 0, w, h, GL_RGBA, GL_FLOAT, rgba.data());
   const GLint filter = linear ? GL_LINEAR : GL_NEAREST;
   glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, filter);
@@ -247,7 +249,51 @@ struct Painting {
   bool mesh_built = false;
   GLuint mesh_vao = 0, mesh_vbo = 0, mesh_ibo = 0;
   size_t mesh_triangles = 0;
+  // A streamed painting (AddStreamedPainting): its resident tiles' textures instead of the above.
+  struct Tile {
+    GLuint textures[4] = {0, 0, 0, 0};
+    int x0 = 0, y0 = 0, width = 0, height = 0;  // the textures (GpuTile)
+    int own_x0 = 0, own_y0 = 0, own_width = 0, own_height = 0;
+    double pitch_mm = 0;
+    float min_height_mm = 0, max_height_mm = 0;
+  };
+  std::unique_ptr<PyramidStream> stream;
+  std::map<TileKey, Tile> tiles;
 };
+
+void DeleteTiles(Painting& p) {
+  for (auto& [key, tile] : p.tiles) glDeleteTextures(4, tile.textures);
+  p.tiles.clear();
+}
+
+// This frame's evictions and uploads of a streamed painting.
+void ApplyStreamFrame(Painting& p, StreamFrame& frame) {
+  for (const TileKey& key : frame.evict) {
+    auto it = p.tiles.find(key);
+    if (it == p.tiles.end()) continue;
+    glDeleteTextures(4, it->second.textures);
+    p.tiles.erase(it);
+  }
+  for (GpuTile& g : frame.upload) {
+    Painting::Tile t;
+    t.x0 = g.x0;
+    t.y0 = g.y0;
+    t.width = g.width;
+    t.height = g.height;
+    t.own_x0 = g.own_x0;
+    t.own_y0 = g.own_y0;
+    t.own_width = g.own_width;
+    t.own_height = g.own_height;
+    t.pitch_mm = g.pitch_mm;
+    t.min_height_mm = g.min_height_mm;
+    t.max_height_mm = g.max_height_mm;
+    // Half floats: a pack holds its values as half (or fewer bits), so nothing is lost.
+    for (int k = 0; k < 4; ++k)
+      t.textures[k] = MakeTexture(g.width, g.height, g.rgba[k], k == 0, GL_RGBA16F);
+    p.tiles[g.key] = t;
+  }
+  frame.upload.clear();
+}
 
 }  // namespace
 
@@ -401,6 +447,7 @@ struct Renderer::Impl {
 
   ~Impl() {
     for (Painting& p : paintings) {
+      DeleteTiles(p);
       glDeleteTextures(4, p.textures);
       glDeleteTextures(kShadingChannels, p.filtered);
       if (p.mesh_built) {
@@ -423,6 +470,61 @@ struct Renderer::Impl {
     glDeleteBuffers(5, bufs);
     DeleteTarget();
   }
+  // A streamed painting: this frame's tiles (PyramidStream::Frame), uploaded and evicted first,
+  // each drawn as the bump program's slab over its own rectangle, from its lowest to its highest
+  // texel (the relief searched everywhere: a tile has no boxes), with its level's textures (the
+  // pack's prefiltered levels). No shadows: a march would stop at the tile's edge.
+  template <typename SetCommon>
+  void DrawStreamed(Painting& p, const ViewCamera& camera, const RenderOptions& options,
+                    const SetCommon& set_common, FrameStats& stats) {
+    StreamFrame frame = p.stream->Frame(camera, p.world_from_canvas);
+    stats.tiles_uploaded += int(frame.upload.size());
+    ApplyStreamFrame(p, frame);
+    stats.tiles_needed += frame.needed;
+    stats.tiles_missing += frame.missing;
+    stats.tiles_loading += frame.loading;
+    stats.stream_bytes += frame.resident_bytes;
+    for (std::string& e : frame.errors) stats.stream_errors.push_back(std::move(e));
+    // With filter_reflectance, a pixel that covers more than a texel of the tile's level shades
+    // several points of that level over its footprint (the filter over one level: u_levels 1).
+    const GLuint prog = options.filter_reflectance ? plane_filtered : plane_program;
+    set_common(prog);
+    auto uniform = [&](const char* name) { return glGetUniformLocation(prog, name); };
+    glProgramUniform1i(prog, uniform("u_levels"), 1);
+    glProgramUniform1i(prog, uniform("u_shadows"), 0);
+    glProgramUniform1i(prog, uniform("u_streamed"), 1);
+    glProgramUniform1i(prog, uniform("u_parallax_iterations"), options.bump_parallax_iterations);
+    glProgramUniform1i(prog, uniform("u_slab_search"), 1);
+    glProgramUniform1f(prog, uniform("u_step_texels"), float(options.linear_step_texels));
+    glProgramUniform1f(prog, uniform("u_search_min_texels"), float(options.bump_search_min_texels));
+    glProgramUniform1i(prog, uniform("u_min_steps"), options.bump_min_steps);
+    glProgramUniform1i(prog, uniform("u_max_steps"), options.max_linear_steps);
+    glProgramUniform1i(prog, uniform("u_binary_steps"), options.bump_binary_steps);
+    glBindVertexArray(box_vao);
+    glEnable(GL_CULL_FACE);
+    glCullFace(GL_BACK);
+    for (const TileKey& key : frame.draw) {
+      auto it = p.tiles.find(key);
+      if (it == p.tiles.end()) continue;
+      const Painting::Tile& t = it->second;
+      for (int k = 0; k < 4; ++k) glBindTextureUnit(k, t.textures[k]);
+      glProgramUniform2i(prog, uniform("u_texels"), t.width, t.height);
+      glProgramUniform1f(prog, uniform("u_pitch_mm"), float(t.pitch_mm));
+      glProgramUniform2f(prog, uniform("u_tile_origin"), float(t.x0), float(t.y0));
+      const float x0 = float(t.own_x0 * t.pitch_mm);
+      const float x1 = float(std::min((t.own_x0 + t.own_width) * t.pitch_mm, p.width_mm));
+      const float y1 = float(p.height_mm - t.own_y0 * t.pitch_mm);
+      const float y0 = float(std::max(0.0, p.height_mm - (t.own_y0 + t.own_height) * t.pitch_mm));
+      const Vec3f lo(x0, y0, t.min_height_mm - 1e-3f), hi(x1, y1, t.max_height_mm + 1e-3f);
+      glProgramUniform3fv(prog, uniform("u_slab_min"), 1, lo.data());
+      glProgramUniform3fv(prog, uniform("u_slab_max"), 1, hi.data());
+      glDrawArrays(GL_TRIANGLES, 0, 36);
+      ++stats.tiles_drawn;
+    }
+    glDisable(GL_CULL_FACE);
+    glProgramUniform1i(prog, uniform("u_streamed"), 0);
+  }
+
   void DeleteTarget() {
     if (fbo) glDeleteFramebuffers(1, &fbo);
     if (colour) glDeleteTextures(1, &colour);
@@ -701,6 +803,44 @@ Result<int> Renderer::AddPainting(const Pack& pack, const std::string& name,
   return int(impl_->paintings.size()) - 1;
 }
 
+Result<int> Renderer::AddStreamedPainting(std::unique_ptr<PyramidStream> stream,
+                                          const std::string& name,
+                                          const RigidTransform& world_from_canvas) {
+  if (!stream) return Error{name + ": no stream"};
+  const PackSummary& s = stream->summary();
+  Painting p;
+  p.name = name;
+  p.world_from_canvas = world_from_canvas;
+  p.texels_w = s.width;
+  p.texels_h = s.height;
+  p.pitch_mm = s.pitch_mm;
+  p.width_mm = stream->width_mm();
+  p.height_mm = stream->height_mm();
+  p.delta0_mm = s.delta0_mm;
+  p.max_height_mm = s.max_height_mm;
+  p.stream = std::move(stream);
+  impl_->paintings.push_back(std::move(p));
+  return int(impl_->paintings.size()) - 1;
+}
+
+bool Renderer::SettleStreams(const ViewCamera& camera, double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  for (;;) {
+    bool complete = true;
+    for (Painting& p : impl_->paintings) {
+      if (!p.stream) continue;
+      StreamFrame frame = p.stream->Frame(camera, p.world_from_canvas);
+      ApplyStreamFrame(p, frame);
+      // Settled: every tile the view needs is resident, or what is still missing cannot come
+      // (a tile that failed, a budget the drawn tiles fill).
+      complete &= frame.missing == 0 || frame.loading == 0;
+    }
+    if (complete || std::chrono::steady_clock::now() > deadline) return complete;
+    for (Painting& p : impl_->paintings)
+      if (p.stream) p.stream->WaitForLoads(0.05);
+  }
+}
+
 void Renderer::SetRoom(const Room& room) {
   std::vector<float> data;
   for (const SceneBox& b : room.boxes)
@@ -911,9 +1051,13 @@ FrameStats Renderer::Draw(const ViewCamera& camera, const std::vector<Light>& li
                           p.level_rows.data());
     };
     // The filtered programs only where some pixel may cover more than a texel.
-    const bool filter = options.filter_reflectance &&
+    const bool filter = !p.stream && options.filter_reflectance &&
                         MaxFootprintTexels(p.width_mm, p.height_mm, p.pitch_mm, p.max_height_mm,
                                            eye.cast<double>(), canvas_from_camera, camera) > 1.0;
+    if (p.stream) {
+      m.DrawStreamed(p, camera, options, set_common, stats);
+      continue;
+    }
     const GLuint plane_prog = filter ? m.plane_filtered : m.plane_program;
     const GLuint box_prog = filter ? m.box_filtered : m.box_program;
     const GLuint mesh_prog = filter ? m.mesh_filtered : m.mesh_program;

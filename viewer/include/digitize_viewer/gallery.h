@@ -16,6 +16,7 @@
 #include "digitize/core.h"
 #include "digitize/pack.h"
 #include "digitize/photo_set.h"
+#include "digitize_viewer/pyramid_stream.h"
 #include "digitize_viewer/renderer.h"
 #include "digitize_viewer/view.h"
 
@@ -63,6 +64,9 @@ std::vector<ViewCamera> GalleryTour(const Gallery& gallery, int frames, int widt
 
 // Reads a pack for the viewer (ReadPack). The error names the file; nothing is thrown.
 Result<Pack> LoadPackForViewer(const std::filesystem::path& path);
+// Whether `path` holds a tiled pack (version 3, from its header alone): the viewer streams those
+// (Renderer::AddStreamedPainting) instead of reading them whole.
+bool IsTiledPack(const std::filesystem::path& path);
 
 // Camera path, docs/formats.md "Camera paths":
 //   {"format": "digitize.camera_path", "version": 1, "width": 640, "height": 480,
@@ -79,6 +83,11 @@ struct GalleryShotOptions {
   std::vector<std::filesystem::path> inputs;
   // Without a camera path: also the first painting's CloseUpView, written here (empty: not).
   std::filesystem::path close_up;
+  // Tiled packs streamed (pyramid_stream.h), hung after the packs; before each image every tile
+  // its view needs is loaded (Renderer::SettleStreams, at most settle_seconds).
+  std::vector<std::filesystem::path> streamed;
+  StreamOptions stream;
+  double settle_seconds = 120;
   GalleryShotOptions() { render.ambient = 0.05; }
 };
 

@@ -48,7 +48,10 @@ struct GalleryScene {
   std::vector<size_t> hung;         // index into packs of each gallery.world_from_canvas
   std::vector<std::string> failed;  // one message per refused pack
 };
+// `streamed_sizes` (W, H mm): paintings streamed from tiled packs (pyramid_stream.h), hung after
+// the packs, in order: gallery.world_from_canvas[hung.size() + j] is streamed painting j's.
 GalleryScene HangPaintings(const std::vector<std::pair<std::string, Pack>>& packs,
-                           const GalleryOptions& options = {});
+                           const GalleryOptions& options = {},
+                           const std::vector<Eigen::Vector2d>& streamed_sizes = {});
 
 }  // namespace digitize::viewer

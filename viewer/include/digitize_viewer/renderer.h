@@ -69,6 +69,7 @@
 #include "digitize/core.h"
 #include "digitize/pack.h"
 #include "digitize/photo_set.h"
+#include "digitize_viewer/pyramid_stream.h"
 #include "digitize_viewer/stylise.h"
 #include "digitize_viewer/view.h"
 
@@ -215,6 +216,14 @@ struct FrameStats {
   int filtered_paintings =
       0;              // drawn with the prefiltered reflectance (a pixel may cover > 1 texel)
   double cpu_ms = 0;  // CPU time to issue the frame (GL is asynchronous: see the bench)
+  // Streamed paintings (AddStreamedPainting), summed over them.
+  int tiles_drawn = 0;
+  int tiles_needed = 0;      // at the level the view needs
+  int tiles_missing = 0;     // of them not resident yet: a coarser ancestor drawn instead
+  int tiles_loading = 0;     // queued or being read
+  int tiles_uploaded = 0;    // this frame
+  int64_t stream_bytes = 0;  // resident tiles' texture memory
+  std::vector<std::string> stream_errors;  // tiles that failed to read (each reported once)
 };
 
 struct RenderedImage {
@@ -267,6 +276,18 @@ class Renderer {
   Result<int> AddPainting(const Pack& pack, const std::string& name,
                           const RigidTransform& world_from_canvas = {},
                           const MeshOptions& mesh = {});
+  // Hangs a tiled pack streamed (pyramid_stream.h): no texel is uploaded now; each Draw uploads
+  // the tiles the view needs (at most StreamOptions::max_uploads_per_frame a frame, within its
+  // budget) and draws the resident ones, coarser ancestors where those are still loading. Tiles
+  // are drawn with the bump program's slab over each tile (relief searched from the tile's lowest
+  // to its highest texel; no relief boxes, no shadows, the levels' own prefiltering instead of
+  // filter_reflectance), in every technique. Returns the painting's index.
+  Result<int> AddStreamedPainting(std::unique_ptr<PyramidStream> stream, const std::string& name,
+                                  const RigidTransform& world_from_canvas = {});
+  // Loads and uploads (without drawing) until every streamed painting has the tiles `camera`
+  // needs, or nothing more can come, at most `seconds`: for screenshots and tests. Whether it got
+  // there.
+  bool SettleStreams(const ViewCamera& camera, double seconds);
   int painting_count() const;
   void SetRoom(const Room& room);  // the room; empty = none
 
