@@ -87,32 +87,10 @@ int RunWindow(const std::vector<std::pair<std::string, Pack>>& packs,
   }
   // A pack the viewer refuses is listed (stderr and the panel); the others hang without a gap.
   // Tiled packs stream: each frame uploads the tiles its view needs (pyramid_stream.h).
-  std::vector<std::unique_ptr<PyramidStream>> streams;
-  std::vector<std::string> stream_names, refused;
-  std::vector<Eigen::Vector2d> stream_sizes;
-  for (const std::string& p : streamed) {
-    auto stream = PyramidStream::Open(p);
-    if (!stream) {
-      refused.push_back(stream.error().message);
-      continue;
-    }
-    stream_sizes.emplace_back((*stream)->width_mm(), (*stream)->height_mm());
-    stream_names.push_back(p);
-    streams.push_back(std::move(stream).value());
-  }
-  GalleryScene scene = HangPaintings(packs, {}, stream_sizes);
+  std::vector<std::string> refused;
+  GalleryScene scene = HangInRenderer(**renderer, packs, {streamed.begin(), streamed.end()},
+                                      StreamOptions{}, refused);
   Gallery& g = scene.gallery;
-  refused.insert(refused.end(), scene.failed.begin(), scene.failed.end());
-  for (size_t k = 0; k < scene.hung.size(); ++k) {
-    const auto& [name, pack] = packs[scene.hung[k]];
-    auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
-    if (!added) refused.push_back(added.error().message);
-  }
-  for (size_t j = 0; j < streams.size(); ++j) {
-    auto added = (*renderer)->AddStreamedPainting(std::move(streams[j]), stream_names[j],
-                                                  g.world_from_canvas[scene.hung.size() + j]);
-    if (!added) refused.push_back(added.error().message);
-  }
   for (const std::string& e : refused) std::fprintf(stderr, "digitize-viewer: %s\n", e.c_str());
   errors.insert(errors.end(), refused.begin(), refused.end());
   (*renderer)->SetRoom(g.room);

@@ -78,6 +78,40 @@ std::filesystem::path ScreenshotPath(const std::filesystem::path& out_png, size_
   return out_png.parent_path() / (out_png.stem().string() + suffix + out_png.extension().string());
 }
 
+GalleryScene HangInRenderer(Renderer& renderer,
+                            const std::vector<std::pair<std::string, Pack>>& packs,
+                            const std::vector<std::filesystem::path>& streamed,
+                            const StreamOptions& stream_options,
+                            std::vector<std::string>& refused) {
+  std::vector<std::unique_ptr<PyramidStream>> streams;
+  std::vector<std::string> names;
+  std::vector<Eigen::Vector2d> sizes;
+  for (const std::filesystem::path& p : streamed) {
+    auto stream = PyramidStream::Open(p, stream_options);
+    if (!stream) {
+      refused.push_back(stream.error().message);
+      continue;
+    }
+    sizes.emplace_back((*stream)->width_mm(), (*stream)->height_mm());
+    names.push_back(p.string());
+    streams.push_back(std::move(stream).value());
+  }
+  GalleryScene scene = HangPaintings(packs, {}, sizes);
+  const Gallery& g = scene.gallery;
+  refused.insert(refused.end(), scene.failed.begin(), scene.failed.end());
+  for (size_t k = 0; k < scene.hung.size(); ++k) {
+    const auto& [name, pack] = packs[scene.hung[k]];
+    auto added = renderer.AddPainting(pack, name, g.world_from_canvas[k]);
+    if (!added) refused.push_back(added.error().message);
+  }
+  for (size_t j = 0; j < streams.size(); ++j) {
+    auto added = renderer.AddStreamedPainting(std::move(streams[j]), names[j],
+                                              g.world_from_canvas[scene.hung.size() + j]);
+    if (!added) refused.push_back(added.error().message);
+  }
+  return scene;
+}
+
 Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>& packs,
                                 const std::filesystem::path& out_png,
                                 const std::vector<ViewCamera>& path,
@@ -102,33 +136,11 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   if (!context) return context.error();
   auto renderer = Renderer::Create();
   if (!renderer) return renderer.error();
-  std::vector<std::unique_ptr<PyramidStream>> streams;
-  std::vector<std::string> stream_names;
-  std::vector<Eigen::Vector2d> stream_sizes;
   std::vector<std::string> refused;
-  for (const std::filesystem::path& p : options.streamed) {
-    auto stream = PyramidStream::Open(p, options.stream);
-    if (!stream) {
-      refused.push_back(stream.error().message);
-      continue;
-    }
-    stream_sizes.emplace_back((*stream)->width_mm(), (*stream)->height_mm());
-    stream_names.push_back(p.string());
-    streams.push_back(std::move(stream).value());
-  }
-  const GalleryScene scene = HangPaintings(packs, {}, stream_sizes);
+  const GalleryScene scene =
+      HangInRenderer(**renderer, packs, options.streamed, options.stream, refused);
   const Gallery& g = scene.gallery;
-  refused.insert(refused.end(), scene.failed.begin(), scene.failed.end());
-  for (size_t k = 0; k < scene.hung.size(); ++k) {
-    const auto& [name, pack] = packs[scene.hung[k]];
-    auto added = (*renderer)->AddPainting(pack, name, g.world_from_canvas[k]);
-    if (!added) refused.push_back(added.error().message);
-  }
-  for (size_t j = 0; j < streams.size(); ++j) {
-    auto added = (*renderer)->AddStreamedPainting(std::move(streams[j]), stream_names[j],
-                                                  g.world_from_canvas[scene.hung.size() + j]);
-    if (!added) refused.push_back(added.error().message);
-  }
+  const bool streaming = !options.streamed.empty();
   if (!refused.empty()) {
     if (failed == nullptr) return Error{refused.front()};
     failed->insert(failed->end(), refused.begin(), refused.end());
@@ -165,7 +177,7 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
   RenderOptions render = options.render;
   render.exposure = options.exposure;  // the styles' tone is the screenshot's
   for (size_t i = 0; i < cameras.size(); ++i) {
-    if (!streams.empty()) (void)(*renderer)->SettleStreams(cameras[i], options.settle_seconds);
+    if (streaming) (void)(*renderer)->SettleStreams(cameras[i], options.settle_seconds);
     const RenderedImage img = (*renderer)->Render(cameras[i], g.lights, render);
     if (Status s = WriteRgb8(outs[i], ToneMap(img.rgb, options.exposure)); !s.ok()) return s;
   }

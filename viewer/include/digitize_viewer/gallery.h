@@ -112,6 +112,16 @@ Status RenderGalleryScreenshots(const std::vector<std::pair<std::string, Pack>>&
                                 const GalleryShotOptions& options = {},
                                 std::vector<std::string>* failed = nullptr);
 
+// Hangs the packs (read whole) and then the tiled packs `streamed` (opened with
+// `stream_options`) in one gallery, each added to `renderer` (AddPainting /
+// AddStreamedPainting); every pack refused on the way is appended to `refused`, naming it. What
+// the screenshots and the window both hang.
+struct GalleryScene;  // painting_setup.h
+GalleryScene HangInRenderer(Renderer& renderer,
+                            const std::vector<std::pair<std::string, Pack>>& packs,
+                            const std::vector<std::filesystem::path>& streamed,
+                            const StreamOptions& stream_options, std::vector<std::string>& refused);
+
 // Encodes the images ScreenshotPath(first_png, i, count), i = 0 .. count - 1, into `video`
 // (H.264 in the container its extension names, `fps` frames a second) with ffmpeg, run without a
 // shell. Errors: fewer than 2 images, ffmpeg not installed (the message says so: Debian's
