@@ -3,8 +3,15 @@
 # (docs/benchmarks.md, "Tiles"). Peak RSS is the kernel's (GNU time's %M: the process's maximum
 # resident set), so it counts everything: photos, canvas, tracer, OIIO's cache, the allocator.
 #   bench/tiles_bench.sh [SIZE ...]   texels along the canvas's longer side (default 1024 2048)
-# Env: CACHE_MB (the tile jobs' image cache, default 256), BIN (the digitize executable, default build/bin/digitize), TILE (tile side, default 512), LIGHTS (photos, default 16), WORK (scratch folder, default a
-# new one under /tmp, removed after), CSV (default docs/bench_tiles.csv).
+# Env: CACHE_MB (the tile jobs' image cache, default 256), BIN (the digitize executable, default
+# build/bin/digitize), TILE (tile side, default 512), LIGHTS (lights per camera position, default
+# 16), ENCODING (photo files, default jpeg), UNTILED_MAX (largest size whose untiled fit is also run
+# and compared, default 2048: it holds every photo whole), WORK (scratch folder, default a new one
+# under /tmp, removed after), CSV (default docs/bench_tiles.csv).
+# The photos are a tiled set, as a large painting is photographed: a grid of camera positions
+# straight above cells of about 2048 x 2048 texels (1 x 1 up to 2048, 2 x 2 at 4096, 4 x 3 at
+# 8192), each cell's image grown by 10 % of a cell on every side, each under its own LIGHTS lights
+# (`digitize synth --camera-grid`), so a texel is seen by the photos of one to four positions.
 # Each tile runs as its own process (`tiles run --index I`), as a Slurm array task would, so its
 # peak RSS is the job's. The merged maps are compared with the untiled fit's (idiff -fail 0).
 # A second plan with a tiled pack (PACK_TILE, default 256; 0 skips it) measures the streamed merge
@@ -35,7 +42,9 @@ measure() {
   tail -1 "$WORK/time"
 }
 
-echo "size,texels,photos,stage,seconds,peak_rss_mb,identical" > "$csv"
+untiled_max=${UNTILED_MAX:-2048}
+encoding=${ENCODING:-jpeg}
+echo "size,texels,grid,photos,photo_mpx,stage,seconds,peak_rss_mb,identical" > "$csv"
 printf '%-6s %-10s %-14s %9s %12s\n' size texels stage seconds peak_MB
 for n in "${sizes[@]}"; do
   d=$WORK/s$n
@@ -44,50 +53,73 @@ for n in "${sizes[@]}"; do
   row() {  # stage seconds kB [identical]
     local mb=$(( $3 / 1024 ))
     printf '%-6s %-10s %-14s %9.1f %12d\n' "$n" "$texels" "$1" "$2" "$mb"
-    echo "$n,$texels,$lights,$1,$2,$mb,${4:-}" >> "$csv"
+    echo "$n,$texels,$grid,$photos,$mpx,$1,$2,$mb,${4:-}" >> "$csv"
   }
-  texels=0
-  # The painting's 400 mm at n texels; the scan samples it 1.5 x as densely (frame and margin).
+  texels=0 photos=0 mpx=0
+  # The painting's 400 x 300 mm at n texels; the scan samples it 1.5 x as densely (frame and
+  # margin); camera cells of about 2048 texels a side.
   pitch=$(awk -v n="$n" 'BEGIN {print 400 / n}')
+  cols=$(( (n + 2047) / 2048 )) rows=$(( (n * 3 / 4 + 2047) / 2048 ))
+  grid="${cols}x$rows"
   read -r s kb < <(measure "$bin" synth -o "$d/synth" --resolution "$n" --photos --lights "$lights" \
-                     --scan-size $((n * 3 / 2)) $((n * 9 / 8)))
+                     --camera-grid "$cols" "$rows" --photo-encoding "$encoding" \
+                     --held-out-lights 0 --scan-size $((n * 3 / 2)) $((n * 9 / 8)))
+  photos=$((cols * rows * lights))
+  mpx=$(grep -oE '[0-9.]+ Mpx' "$WORK/last.log" | head -1 | awk '{print $1}')
+  echo "  photo set: $(grep -oE 'photo set: [^;]*;[^;]*' "$WORK/last.log" | head -1)," \
+       "$(du -sh "$d/synth/photos/images" | cut -f1) on disk"
   row synth "$s" "$kb"
   read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch")
   texels=$(oiiotool --info "$d/canvas/height.exr" |
              sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
   row preprocess "$s" "$kb"
-  read -r s kb < <(measure "$bin" fit --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
-                     -o "$d/fit")
-  row fit_untiled "$s" "$kb"
-  read -r s kb < <(measure "$bin" tiles plan --canvas "$d/canvas" \
-                     --photos "$d/synth/photos/calib.json" --plan "$d/plan.json" \
-                     --out "$d/tiled.pack.exr" --tile-size "$tile")
-  row tiles_plan "$s" "$kb"
-  count=$("$bin" tiles status "$d/plan.json" 2>&1 | grep -oE '[0-9]+ of [0-9]+ tiles' |
-          head -1 | awk '{print $3}') || true
-  total=0 peak=0
-  for ((i = 0; i < count; ++i)); do
-    read -r s kb < <(measure "$bin" tiles run "$d/plan.json" --index "$i" --cache-mb "$cache")
-    total=$(awk -v a="$total" -v b="$s" 'BEGIN {print a + b}')
-    [ "$kb" -gt "$peak" ] && peak=$kb
-  done
-  row "tile_jobs_x$count" "$total" "$peak"
-  read -r s kb < <(measure "$bin" tiles merge "$d/plan.json")
-  same=yes
-  for f in "$d"/fit/*.exr; do
-    idiff -fail 0 -warn 0 -a "$f" "$d/plan.tiles/fit/$(basename "$f")" > /dev/null || same=no
-  done
-  row tiles_merge "$s" "$kb" "$same"
-  if [ "$pack_tile" -gt 0 ]; then
-    "$bin" tiles plan --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
-      --plan "$d/plan_tiled.json" --out "$d/tiled_$pack_tile.pack.exr" --tile-size "$tile" \
-      --pack-tile-size "$pack_tile" > "$WORK/last.log" 2>&1
-    "$bin" tiles run "$d/plan_tiled.json" --all --cache-mb "$cache" > "$WORK/last.log" 2>&1
-    read -r s kb < <(measure "$bin" tiles merge "$d/plan_tiled.json")
-    verified=no
-    "$bin" verify "$d/tiled_$pack_tile.pack.exr" > /dev/null 2>&1 && verified=verified
-    row "tiles_merge_streamed_$pack_tile" "$s" "$kb" "$verified"
+  untiled=0
+  if [ "$n" -le "$untiled_max" ]; then
+    untiled=1
+    read -r s kb < <(measure "$bin" fit --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
+                       -o "$d/fit")
+    row fit_untiled "$s" "$kb"
   fi
+  # Above UNTILED_MAX the plan writes the tiled pack straight away (its merge streams; the
+  # whole-map merge is what does not scale); at or below it, a single-grid pack plan first, compared
+  # with the untiled fit, then the tiled-pack plan's streamed merge.
+  plans=()
+  [ "$untiled" = 1 ] && plans+=(0)
+  [ "$pack_tile" -gt 0 ] && plans+=("$pack_tile")
+  for pt in "${plans[@]}"; do
+    plan=$d/plan_$pt.json
+    read -r s kb < <(measure "$bin" tiles plan --canvas "$d/canvas" \
+                       --photos "$d/synth/photos/calib.json" --plan "$plan" \
+                       --out "$d/tiled_$pt.pack.exr" --tile-size "$tile" --pack-tile-size "$pt")
+    count=$("$bin" tiles status "$plan" 2>&1 | grep -oE '[0-9]+ of [0-9]+ tiles' |
+            head -1 | awk '{print $3}') || true
+    if [ "$pt" = 0 ] || [ "$untiled" = 0 ]; then
+      row tiles_plan "$s" "$kb"
+      # Each tile its own process, as an array task: its peak RSS is the job's.
+      total=0 peak=0
+      for ((i = 0; i < count; ++i)); do
+        read -r s kb < <(measure "$bin" tiles run "$plan" --index "$i" --cache-mb "$cache")
+        total=$(awk -v a="$total" -v b="$s" 'BEGIN {print a + b}')
+        [ "$kb" -gt "$peak" ] && peak=$kb
+        echo "  tile $i of $count: ${s} s, $((kb / 1024)) MB" >> "$WORK/tiles.log"
+      done
+      row "tile_jobs_x$count" "$total" "$peak"
+    else
+      "$bin" tiles run "$plan" --all --cache-mb "$cache" > "$WORK/last.log" 2>&1
+    fi
+    read -r s kb < <(measure "$bin" tiles merge "$plan")
+    if [ "$pt" = 0 ]; then
+      same=yes
+      for f in "$d"/fit/*.exr; do
+        idiff -fail 0 -warn 0 -a "$f" "$d/plan_0.tiles/fit/$(basename "$f")" > /dev/null || same=no
+      done
+      row tiles_merge "$s" "$kb" "$same"
+    else
+      verified=no
+      "$bin" verify "$d/tiled_$pt.pack.exr" > /dev/null 2>&1 && verified=verified
+      row "tiles_merge_streamed_$pt" "$s" "$kb" "$verified"
+    fi
+  done
   rm -rf "$d"
 done
 echo "wrote $csv"

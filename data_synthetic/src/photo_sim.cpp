@@ -102,13 +102,11 @@ struct SrgbCodec {
 
 const SrgbCodec& Codec(PhotoEncoding e) {
   static const SrgbCodec codec8(255), codec16(65535);
-  return e == PhotoEncoding::kSrgb8 ? codec8 : codec16;
+  return e == PhotoEncoding::kSrgb16 ? codec16 : codec8;
 }
 
 // ---------------------------------------------------------------------------------------------
 // Placement.
-
-Vec3d CanvasCentre(const Painting& p) { return {0.5 * p.width_mm, 0.5 * p.height_mm, 0.0}; }
 
 // camera_from_canvas of a camera at `eye` looking at `target`: z along the view, x right, y down,
 // with image rows running down the canvas (-Y) as in the texel grid, so the top view shows the
@@ -134,21 +132,40 @@ struct View {
   Vec3d eye_canvas = Vec3d::Zero();
 };
 
+// The canvas rectangle [x0, x1] x [y0, y1] (mm, canvas frame, Z = 0) a camera must hold.
+struct ViewRect {
+  double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  Vec3d Centre() const { return {0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.0}; }
+};
+
+// The canvas grown by view_margin of its size (the arc's cameras), or the grid cell (c, r) grown
+// by grid_overlap of the cell's size.
+ViewRect CanvasView(const Painting& p, const PhotoSimOptions& o) {
+  const double mx = o.view_margin * p.width_mm, my = o.view_margin * p.height_mm;
+  return {-mx, -my, p.width_mm + mx, p.height_mm + my};
+}
+ViewRect CellView(const Painting& p, const PhotoSimOptions& o, int c, int r) {
+  const double cw = p.width_mm / o.grid_cols, ch = p.height_mm / o.grid_rows;
+  const double mx = o.grid_overlap * cw, my = o.grid_overlap * ch;
+  // Row 0 at the top (largest Y), as the texel grid and the images.
+  const double top = p.height_mm - r * ch;
+  return {c * cw - mx, top - ch - my, (c + 1) * cw + mx, top + my};
+}
+
 View MakeView(const Painting& painting, const PhotoSimOptions& o, const Vec3d& eye,
-              const RigidTransform& canvas_from_scan) {
+              const ViewRect& rect, const RigidTransform& canvas_from_scan) {
   View view;
   view.eye_canvas = eye;
-  view.camera_from_canvas = LookAt(eye, CanvasCentre(painting));
+  view.camera_from_canvas = LookAt(eye, rect.Centre());
   Camera& cam = view.camera;
   cam.model = CameraModel::kPinhole;
   // One texel at the canvas centre spans pixels_per_texel pixels when seen from the top.
   const double f = o.pixels_per_texel * o.camera_distance_mm / painting.truth.pitch_mm;
   cam.fx = cam.fy = f;
-  // The canvas grown by view_margin of its size on every side must be in the image.
-  const double mx = o.view_margin * painting.width_mm, my = o.view_margin * painting.height_mm;
+  // The rectangle must be in the image.
   double half_u = 0, half_v = 0;
-  for (double X : {-mx, painting.width_mm + mx}) {
-    for (double Y : {-my, painting.height_mm + my}) {
+  for (double X : {rect.x0, rect.x1}) {
+    for (double Y : {rect.y0, rect.y1}) {
       const Vec3d p = view.camera_from_canvas.Apply(Vec3d(X, Y, 0));
       DIGITIZE_CHECK(p.z() > 1e-6,
                      "SimulatePhotoSet: the canvas (with its margin) reaches behind "
@@ -169,8 +186,8 @@ View MakeView(const Painting& painting, const PhotoSimOptions& o, const Vec3d& e
   return view;
 }
 
-// The light at spiral position s (0 .. n-1 are the fitting lights), canvas frame.
-Vec3d SpiralLight(const Painting& painting, const PhotoSimOptions& o, double s, int n) {
+// The light at spiral position s (0 .. n-1 are the fitting lights) around `centre`, canvas frame.
+Vec3d SpiralLight(const Vec3d& centre, const PhotoSimOptions& o, double s, int n) {
   const double sin_lo = std::sin(o.light_min_elevation_deg * kDeg);
   const double sin_hi = std::sin(o.light_max_elevation_deg * kDeg);
   // Equal steps in sin(elevation): equal dome area per light.
@@ -178,8 +195,7 @@ Vec3d SpiralLight(const Painting& painting, const PhotoSimOptions& o, double s, 
   const double sin_el = std::clamp(sin_lo + u * (sin_hi - sin_lo), -1.0, 1.0);
   const double cos_el = std::sqrt(std::max(0.0, 1 - sin_el * sin_el));
   const double az = s * kGoldenAngleRad;
-  return CanvasCentre(painting) +
-         o.light_distance_mm * Vec3d(cos_el * std::cos(az), cos_el * std::sin(az), sin_el);
+  return centre + o.light_distance_mm * Vec3d(cos_el * std::cos(az), cos_el * std::sin(az), sin_el);
 }
 
 // Held-out light j of m: between fitting lights (half-integer spiral positions, evenly spread)
@@ -481,6 +497,8 @@ const char* ToString(PhotoEncoding e) {
       return "srgb16";
     case PhotoEncoding::kLinearExr:
       return "exr";
+    case PhotoEncoding::kJpeg:
+      return "jpeg";
   }
   return "?";
 }
@@ -518,9 +536,21 @@ Status PhotoSimOptions::Validate() const {
   if (!in(noise_sigma, 0, 1))
     return fail("noise_sigma must be in [0, 1] (linear), got " + FormatNumber(noise_sigma));
   if (encoding != PhotoEncoding::kSrgb8 && encoding != PhotoEncoding::kSrgb16 &&
-      encoding != PhotoEncoding::kLinearExr)
-    return fail("encoding must be srgb8, srgb16 or exr, got " +
+      encoding != PhotoEncoding::kLinearExr && encoding != PhotoEncoding::kJpeg)
+    return fail("encoding must be srgb8, srgb16, exr or jpeg, got " +
                 std::to_string(static_cast<int>(encoding)));
+  if (jpeg_quality < 50 || jpeg_quality > 100)
+    return fail("jpeg_quality must be in [50, 100], got " + std::to_string(jpeg_quality));
+  if ((grid_cols == 0) != (grid_rows == 0) || grid_cols < 0 || grid_rows < 0 || grid_cols > 64 ||
+      grid_rows > 64)
+    return fail("the camera grid must be 0 x 0 (an arc) or 1..64 x 1..64 cells, got " +
+                std::to_string(grid_cols) + " x " + std::to_string(grid_rows));
+  if (grid() && cameras != 1)
+    return fail("a camera grid has one camera per cell: cameras must be 1, got " +
+                std::to_string(cameras));
+  if (!in(grid_overlap, 0, 1))
+    return fail("grid_overlap must be in [0, 1] (share of a cell), got " +
+                FormatNumber(grid_overlap));
   if (!in(frame_albedo, 0, 1))
     return fail("frame_albedo must be in [0, 1], got " + FormatNumber(frame_albedo));
   return Status::Ok();
@@ -528,15 +558,16 @@ Status PhotoSimOptions::Validate() const {
 
 std::string SyntheticPhotoSet::Brief() const {
   size_t pixels = 0;
-  for (const Photo& p : fit.photos) pixels += p.rgb.size();
+  for (const Photo& p : fit.photos) pixels += static_cast<size_t>(p.camera.width) * p.camera.height;
   const Camera* cam = fit.photos.empty() ? nullptr : &fit.photos.front().camera;
   char buf[320];
   std::snprintf(buf, sizeof buf,
-                "%zu images %dx%d (%d camera(s) x %d lights, %s) + %zu held-out; %.1f Mpx; "
+                "%zu images %dx%d (%d camera(s)%s x %d lights, %s) + %zu held-out; %.1f Mpx; "
                 "%zu saturated px (%.2f %%), %.1f %% of lit canvas px in shadow; %.2f s",
-                fit.photos.size(), cam ? cam->width : 0, cam ? cam->height : 0, options.cameras,
-                options.lights, ToString(options.encoding), held_out.photos.size(), pixels * 1e-6,
-                saturated_pixels, pixels ? 100.0 * saturated_pixels / pixels : 0.0,
+                fit.photos.size(), cam ? cam->width : 0, cam ? cam->height : 0,
+                options.camera_positions(), options.grid() ? " in a grid" : "", options.lights,
+                ToString(options.encoding), held_out.photos.size(), pixels * 1e-6, saturated_pixels,
+                pixels ? 100.0 * saturated_pixels / pixels : 0.0,
                 canvas_lit_pixels ? 100.0 * shadowed_pixels / canvas_lit_pixels : 0.0,
                 render_seconds);
   return buf;
@@ -545,7 +576,7 @@ std::string SyntheticPhotoSet::Brief() const {
 SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& canvas_from_scan,
                                    const PhotoSimOptions& options,
                                    std::vector<PaintMaterial> materials,
-                                   const ProgressCallback& progress) {
+                                   const ProgressCallback& progress, const PhotoSink& sink) {
   const auto start = std::chrono::steady_clock::now();
   const Status valid = options.Validate();
   DIGITIZE_CHECK(valid.ok(), "SimulatePhotoSet: " + valid.message());
@@ -601,24 +632,49 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
     }
   }
 
-  // Cameras: the fitting arc, then the held-out camera off the arc.
-  const Vec3d centre = CanvasCentre(painting);
+  // Cameras: the fitting arc (or grid), then the held-out camera off the arc (or over cell 0).
   const double dist = options.camera_distance_mm;
   std::vector<View> views;
-  for (int c = 0; c < options.cameras; ++c) {
-    const double a =
-        options.cameras == 1
-            ? 0.0
-            : (-options.camera_arc_deg + 2 * options.camera_arc_deg * c / (options.cameras - 1)) *
-                  kDeg;
-    views.push_back(MakeView(painting, options, centre + dist * Vec3d(std::sin(a), 0, std::cos(a)),
-                             canvas_from_scan));
+  std::vector<Vec3d> light_centres;  // per fitting view: the centre of its dome of lights
+  if (options.grid()) {
+    for (int r = 0; r < options.grid_rows; ++r) {
+      for (int c = 0; c < options.grid_cols; ++c) {
+        const ViewRect cell = CellView(painting, options, c, r);
+        light_centres.push_back(cell.Centre());
+        views.push_back(
+            MakeView(painting, options, cell.Centre() + Vec3d(0, 0, dist), cell, canvas_from_scan));
+      }
+    }
+  } else {
+    const ViewRect whole = CanvasView(painting, options);
+    for (int c = 0; c < options.cameras; ++c) {
+      const double a =
+          options.cameras == 1
+              ? 0.0
+              : (-options.camera_arc_deg + 2 * options.camera_arc_deg * c / (options.cameras - 1)) *
+                    kDeg;
+      light_centres.push_back(whole.Centre());
+      views.push_back(MakeView(painting, options,
+                               whole.Centre() + dist * Vec3d(std::sin(a), 0, std::cos(a)), whole,
+                               canvas_from_scan));
+    }
   }
-  const int held_out_view = options.cameras;
+  const int held_out_view = static_cast<int>(views.size());
+  // A grid's held-out views look at a cell-sized patch at the canvas centre (not a corner: the
+  // frame's shadows would dominate the score); an image of the whole canvas would be the size of
+  // the whole painting (gigapixels for a large one).
+  ViewRect held_rect = CanvasView(painting, options);
+  if (options.grid()) {
+    const ViewRect cell = CellView(painting, options, 0, 0);
+    const Vec3d half = 0.5 * Vec3d(cell.x1 - cell.x0, cell.y1 - cell.y0, 0);
+    const Vec3d mid(0.5 * painting.width_mm, 0.5 * painting.height_mm, 0);
+    held_rect = {mid.x() - half.x(), mid.y() - half.y(), mid.x() + half.x(), mid.y() + half.y()};
+  }
   {
     const double a = options.held_out_camera_deg * kDeg;
-    views.push_back(MakeView(painting, options, centre + dist * Vec3d(0, std::sin(a), std::cos(a)),
-                             canvas_from_scan));
+    views.push_back(MakeView(painting, options,
+                             held_rect.Centre() + dist * Vec3d(0, std::sin(a), std::cos(a)),
+                             held_rect, canvas_from_scan));
   }
 
   // Lights, grey: a white Lambertian at the centre lit head-on reads white_level.
@@ -632,12 +688,10 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
     l.intensity = Vec3f::Constant(intensity);
     return l;
   };
-  std::vector<Vec3d> fit_lights, held_lights;
-  for (int j = 0; j < options.lights; ++j)
-    fit_lights.push_back(SpiralLight(painting, options, j, options.lights));
+  std::vector<Vec3d> held_lights;
   for (int j = 0; j < options.held_out_lights; ++j) {
     const double s = HeldOutSpiralPosition(j, options.held_out_lights, options.lights);
-    held_lights.push_back(SpiralLight(painting, options, s, options.lights));
+    held_lights.push_back(SpiralLight(held_rect.Centre(), options, s, options.lights));
   }
 
   // Photos (pixels filled below) and the jobs that render them.
@@ -645,7 +699,9 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
   const ColourEncoding fit_encoding = options.encoding == PhotoEncoding::kLinearExr
                                           ? ColourEncoding::kLinear
                                           : ColourEncoding::kSrgb;
-  const char* ext = options.encoding == PhotoEncoding::kLinearExr ? "exr" : "png";
+  const char* ext = options.encoding == PhotoEncoding::kLinearExr ? "exr"
+                    : options.encoding == PhotoEncoding::kJpeg    ? "jpg"
+                                                                  : "png";
   // Every pixel is written by the render loop below: no zero fill (0.3 s of one thread for 64
   // megapixel images), the pages are touched first by the threads that render them.
   auto unfilled = [](int w, int h) {
@@ -661,19 +717,18 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
     return std::string(buf);
   };
   out.fit.source = "synthetic";
-  for (int c = 0; c < options.cameras; ++c) {
+  for (int c = 0; c < held_out_view; ++c) {
     for (int j = 0; j < options.lights; ++j) {
+      const Vec3d light = SpiralLight(light_centres[c], options, j, options.lights);
       Photo photo;
       const int i = static_cast<int>(out.fit.photos.size());
       photo.path = name("images/img_", i, ext);
       photo.entry = "synthetic: images[" + std::to_string(i) + "]";
       photo.camera = views[c].camera;
-      photo.light = make_light(fit_lights[j]);
+      photo.light = make_light(light);
       photo.encoding = fit_encoding;
-      photo.rgb = unfilled(photo.camera.width, photo.camera.height);
-      photo.flags = Grid<uint8_t>(photo.camera.width, photo.camera.height, 0);
       out.fit.photos.push_back(std::move(photo));
-      jobs_of_view[c].push_back({c, fit_lights[j], false, i});
+      jobs_of_view[c].push_back({c, light, false, i});
     }
   }
   out.held_out.source = "synthetic held-out";
@@ -686,9 +741,8 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
       photo.camera = views[v].camera;
       photo.light = make_light(held_lights[j]);
       photo.encoding = ColourEncoding::kLinear;
-      photo.rgb = unfilled(photo.camera.width, photo.camera.height);
       out.held_out.photos.push_back(std::move(photo));
-      out.held_out_mask.emplace_back(photo.camera.width, photo.camera.height, 0);
+      out.held_out_mask.emplace_back();
       jobs_of_view[v].push_back({v, held_lights[j], true, i});
     }
   }
@@ -724,6 +778,16 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
     const View& view = views[v];
     const Grid<PixelHit> hits = TracePrimary(scene, view, out.material_index);
     const int w = view.camera.width, h = view.camera.height;
+    // Pixels are allocated a camera position at a time (with a sink, only its images are held).
+    for (const Job& job : jobs) {
+      Photo& photo = job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
+      photo.rgb = unfilled(w, h);
+      if (job.held_out) {
+        out.held_out_mask[job.index] = Grid<uint8_t>(w, h, 0);
+      } else {
+        photo.flags = Grid<uint8_t>(w, h, 0);
+      }
+    }
     const int blocks = (h + kRowGrain - 1) / kRowGrain;
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, jobs.size() * blocks, 1),
@@ -823,23 +887,43 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
             rows_finished(static_cast<size_t>(y1 - y0));
           }
         });
+    // Per-photo counts, as LoadPhoto reports them (flags empty when nothing is flagged), then
+    // the sink takes the finished images and their pixels go.
+    std::vector<Status> sunk(jobs.size());
+    tbb::parallel_for(size_t{0}, jobs.size(), [&](size_t k) {
+      const Job& job = jobs[k];
+      Photo& photo = job.held_out ? out.held_out.photos[job.index] : out.fit.photos[job.index];
+      if (!job.held_out) {
+        photo.saturated_pixels = 0;
+        for (uint8_t f : photo.flags.data) photo.saturated_pixels += (f & kPixelSaturated) != 0;
+        if (photo.saturated_pixels == 0) photo.flags = Grid<uint8_t>();
+      }
+      if (!sink) return;
+      sunk[k] = sink(photo, job.held_out ? &out.held_out_mask[job.index] : nullptr, job.index);
+      photo.rgb = Grid<Vec3f>();
+      photo.flags = Grid<uint8_t>();
+      if (job.held_out) out.held_out_mask[job.index] = Grid<uint8_t>();
+    });
+    if (sink) {
+      out.pixels_released = true;
+      for (const Status& st : sunk) {
+        if (!st.ok() && out.sink_status.ok()) out.sink_status = st;
+      }
+      if (!out.sink_status.ok()) break;
+    }
   }
 
-  // Per-photo counts, as LoadPhoto reports them (flags empty when nothing is flagged).
   PhotoLoadSummary& summary = out.fit.summary;
   for (Photo& photo : out.fit.photos) {
-    photo.saturated_pixels = 0;
-    for (uint8_t f : photo.flags.data) photo.saturated_pixels += (f & kPixelSaturated) != 0;
-    if (photo.saturated_pixels == 0) photo.flags = Grid<uint8_t>();
     ++summary.photos_loaded;
-    summary.pixels += photo.rgb.size();
+    summary.pixels += static_cast<size_t>(photo.camera.width) * photo.camera.height;
     summary.saturated_pixels += photo.saturated_pixels;
     (photo.encoding == ColourEncoding::kSrgb ? summary.srgb_photos : summary.linear_photos) += 1;
   }
   PhotoLoadSummary& held = out.held_out.summary;
   for (const Photo& photo : out.held_out.photos) {
     ++held.photos_loaded;
-    held.pixels += photo.rgb.size();
+    held.pixels += static_cast<size_t>(photo.camera.width) * photo.camera.height;
     ++held.linear_photos;
   }
   out.saturated_pixels = counts.saturated;

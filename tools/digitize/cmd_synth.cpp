@@ -27,6 +27,7 @@ struct SynthArgs {
        no_cracks = false;
   // Photo set (--photos).
   bool photos = false, measured = false;
+  std::vector<int> camera_grid;  // --camera-grid C R
   synth::PhotoSimOptions photo;
   std::string photo_encoding = "srgb8";
   // RTI capture (--rti).
@@ -123,7 +124,12 @@ int RunSynth(SynthArgs args) {
       args.rti_encoding == "exr" ? synth::RtiEncoding::kLinearFloat : synth::RtiEncoding::kSrgb8;
   args.photo.encoding = args.photo_encoding == "srgb16" ? synth::PhotoEncoding::kSrgb16
                         : args.photo_encoding == "exr"  ? synth::PhotoEncoding::kLinearExr
+                        : args.photo_encoding == "jpeg" ? synth::PhotoEncoding::kJpeg
                                                         : synth::PhotoEncoding::kSrgb8;
+  if (args.camera_grid.size() == 2) {
+    args.photo.grid_cols = args.camera_grid[0];
+    args.photo.grid_rows = args.camera_grid[1];
+  }
   std::vector<synth::PaintMaterial> materials;
   if (args.photos) {
     materials = synth::DefaultPaintMaterials(args.measured);
@@ -150,27 +156,25 @@ int RunSynth(SynthArgs args) {
   const synth::Scene scene(painting, args.frame);
   bar.Update("scan", 0.45 * k);
   const synth::SyntheticScan scan = synth::SimulateScan(scene, args.scan);
-  synth::SyntheticPhotoSet photos;
-  if (args.photos) {
-    const double from = 0.7 * k;
-    photos = synth::SimulatePhotoSet(
-        scene, scan.canvas_from_scan, args.photo, materials,
-        [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); });
-  }
+  synth::SyntheticPhotoSet photos;  // without pixels: each image is written once rendered
   synth::SyntheticRtiCapture rti;
   if (args.rti) {
-    bar.Update("rti", 0.7 * k + render_share);
+    bar.Update("rti", 0.6 * k);
     rti = synth::SimulateRti(painting, args.rti_options);
   }
-  bar.Update("writing", 0.7 * k + render_share);
   Status written =
       WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
+        bar.Update("writing", 0.7 * k);
         if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
         if (args.rti) {
           if (Status s = synth::WriteSyntheticRti(dir / "rti", rti); !s.ok()) return s;
         }
         if (!args.photos) return Status::Ok();
-        return synth::WriteSyntheticPhotoSet(dir / "photos", photos);
+        const double from = 0.7 * k;
+        return synth::RenderSyntheticPhotoSet(
+            dir / "photos", scene, scan.canvas_from_scan, args.photo, materials,
+            [&](std::string_view step, double f) { bar.Update(step, from + render_share * f); },
+            &photos);
       });
   bar.Finish();
   if (!written.ok()) return Fail(cmd, written.message());
@@ -299,9 +303,33 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->needs(photos)
       ->group("Photos");
+  c->add_option("--camera-grid", args->camera_grid,
+                "A tiled photo set, as a large painting is photographed: one camera straight above "
+                "each of C x R cells of the canvas, each under its own --lights (replaces "
+                "--cameras' arc)")
+      ->expected(2)
+      ->needs(photos)
+      ->group("Photos");
+  c->add_option("--grid-overlap", ph.grid_overlap,
+                "With --camera-grid: each image covers its cell grown by this share of a cell on "
+                "every side")
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
+  c->add_option("--pixels-per-texel", ph.pixels_per_texel,
+                "Image sampling of the canvas: pixels per texel at the image centre")
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
+  c->add_option("--held-out-lights", ph.held_out_lights,
+                "Held-out lights (noise-free renders from two views to judge a fit; 0: none)")
+      ->capture_default_str()
+      ->needs(photos)
+      ->group("Photos");
   c->add_option("--photo-encoding", args->photo_encoding,
-                "Image files: 8-bit sRGB PNG, 16-bit sRGB PNG, or linear float EXR")
-      ->check(CLI::IsMember({"srgb8", "srgb16", "exr"}))
+                "Image files: 8-bit sRGB PNG, 16-bit sRGB PNG, linear float EXR, or 8-bit sRGB "
+                "JPEG (quality 95, 4:4:4: a tiled set of a large painting stays a few GB)")
+      ->check(CLI::IsMember({"srgb8", "srgb16", "exr", "jpeg"}))
       ->capture_default_str()
       ->needs(photos)
       ->group("Photos");

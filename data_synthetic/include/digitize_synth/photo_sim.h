@@ -41,6 +41,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -83,8 +84,11 @@ std::vector<PaintMaterial> DefaultPaintMaterials(bool with_measured);
 // painting with 7 regions shows.
 std::vector<PaintMaterial> GgxPaintMaterials();
 
-enum class PhotoEncoding { kSrgb8, kSrgb16, kLinearExr };
-const char* ToString(PhotoEncoding e);  // "srgb8", "srgb16", "exr"
+// kJpeg: the 8-bit sRGB codes of kSrgb8, written as JPEG (quality jpeg_quality, 4:4:4) so that a
+// tiled set of a large painting stays a few GB on disk. The in-memory pixels are the codes before
+// compression; the files read back within JPEG's loss of them.
+enum class PhotoEncoding { kSrgb8, kSrgb16, kLinearExr, kJpeg };
+const char* ToString(PhotoEncoding e);  // "srgb8", "srgb16", "exr", "jpeg"
 
 struct PhotoSimOptions {
   // Cameras (pinhole) on an arc in the canvas XZ plane through the canvas normal, all aimed at the
@@ -93,6 +97,15 @@ struct PhotoSimOptions {
   // behind it throws.
   int cameras = 1;
   double camera_arc_deg = 30;
+  // A tiled photo set, as a large painting is photographed: grid_cols x grid_rows >= 1 puts one
+  // camera straight above the centre of each of that many equal cells of the canvas (row by row
+  // from the top-left cell), its image covering the cell grown by grid_overlap of the cell's size
+  // on every side, under its own `lights` lights: the spiral dome below, centred on its cell.
+  // cameras must then be 1 (the arc is not used). The held-out images look at a cell-sized patch
+  // (with the overlap) at the canvas centre: from straight above and tilted by
+  // held_out_camera_deg, lights on the dome around the canvas centre. 0 x 0: the arc.
+  int grid_cols = 0, grid_rows = 0;
+  double grid_overlap = 0.1;
   double camera_distance_mm = 1200;  // from the canvas centre
   double pixels_per_texel = 1.0;     // image sampling on the canvas at the centre (top view)
   double view_margin = 0.08;         // share of canvas width / height added on each side (frame
@@ -117,9 +130,12 @@ struct PhotoSimOptions {
   double held_out_camera_deg = 20;
   double noise_sigma = 0.002;  // fitting images: Gaussian, linear radiance units, before encoding
   PhotoEncoding encoding = PhotoEncoding::kSrgb8;
+  int jpeg_quality = 95;  // kJpeg only, 50 .. 100
   bool shadows = true;
   double frame_albedo = 0.35;
   uint64_t seed = 1;
+  bool grid() const { return grid_cols > 0; }
+  int camera_positions() const { return grid() ? grid_cols * grid_rows : cameras; }
   Status Validate() const;
 };
 
@@ -127,7 +143,7 @@ struct SyntheticPhotoSet {
   PhotoSet fit;       // pixels loaded as a reader would return them after decoding the encoded
                       // files (quantised, linearised, saturated pixels flagged); entry names
                       // "synthetic: images[i]"; order: camera c x light j at c * lights + j;
-                      // paths "images/img_NNN.{png,exr}" (as WriteSyntheticPhotoSet names them)
+                      // paths "images/img_NNN.{png,exr,jpg}" (as WriteSyntheticPhotoSet names them)
   PhotoSet held_out;  // noise-free linear renders (encoding kLinear, no flags)
   // Per held-out image: 1 where the pixel shows a canvas texel that no frame shadow darkens (the
   // pixels a fit of the canvas alone can be judged on), else 0.
@@ -146,6 +162,10 @@ struct SyntheticPhotoSet {
   // whose shadow ray is blocked (relief or frame).
   size_t canvas_lit_pixels = 0, shadowed_pixels = 0;
   double render_seconds = 0;  // wall time of SimulatePhotoSet
+  // Set when SimulatePhotoSet was given a sink: the photos' pixels were handed to it and released
+  // (photo.rgb and flags empty); the first error the sink returned, after which rendering stopped.
+  bool pixels_released = false;
+  Status sink_status = Status::Ok();
   // "64 images 1188x891 (1 camera(s) x 64 lights, srgb8) + 16 held-out; 67.7 Mpx; 1234 saturated
   // px (0.00 %), 2.1 % of lit canvas px in shadow; 8.10 s"
   std::string Brief() const;
@@ -162,14 +182,23 @@ struct GgxPaintingCase {
 };
 GgxPaintingCase MakeGgxPaintingCase(int resolution_px = 96, uint64_t seed = 1);
 
+// Receives each image as soon as its camera position is rendered (held_out_mask: null for a
+// fitting image, the image's mask for a held-out one; index into fit.photos or held_out.photos).
+// Called from several threads at once, for different images.
+using PhotoSink =
+    std::function<Status(const Photo& photo, const Grid<uint8_t>* held_out_mask, int index)>;
+
 // Invalid options throw (validate first). `materials` empty: DefaultPaintMaterials(false).
+// With a sink, every image goes to it once its camera position is done and its pixels are then
+// released, so memory holds one camera position's images instead of the whole set.
 SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& canvas_from_scan,
                                    const PhotoSimOptions& options,
                                    std::vector<PaintMaterial> materials = {},
-                                   const ProgressCallback& progress = nullptr);
+                                   const ProgressCallback& progress = nullptr,
+                                   const PhotoSink& sink = nullptr);
 
 // Writes, each file atomically, into `dir` (created):
-//   calib.json + images/img_NNN.{png,exr}             the fitting set (docs/formats.md calibration)
+//   calib.json + images/img_NNN.{png,exr,jpg}         the fitting set (docs/formats.md calibration)
 //   held_out/calib.json + held_out/img_NNN.exr       held-out renders (linear EXR; the JSON only
 //                                                    when there are held-out images)
 //   held_out/mask_NNN.png                            held_out_mask (0/255)
@@ -181,5 +210,17 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
 // ReadCalibration). PNGs are written as 8- or 16-bit RGB codes; every file reads back to the
 // in-memory pixels exactly. Errors name the file; files already written stay.
 Status WriteSyntheticPhotoSet(const std::filesystem::path& dir, const SyntheticPhotoSet& set);
+
+// SimulatePhotoSet and WriteSyntheticPhotoSet in one, in the memory of one camera position: each
+// image is written as soon as its camera position is rendered (the same files, byte for byte).
+// This is how `digitize synth --photos` writes, so a tiled set of a 8k x 6k-texel painting
+// (gigapixels in all) needs no more memory than one of its cells. `summary`, when given, gets the
+// set without pixels (cameras, lights, counts, truth).
+Status RenderSyntheticPhotoSet(const std::filesystem::path& dir, const Scene& scene,
+                               const RigidTransform& canvas_from_scan,
+                               const PhotoSimOptions& options,
+                               std::vector<PaintMaterial> materials = {},
+                               const ProgressCallback& progress = nullptr,
+                               SyntheticPhotoSet* summary = nullptr);
 
 }  // namespace digitize::synth
