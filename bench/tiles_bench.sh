@@ -68,10 +68,11 @@ for n in "${sizes[@]}"; do
   mpx=$(grep -oE '[0-9.]+ Mpx' "$WORK/last.log" | head -1 | awk '{print $1}')
   echo "  photo set: $(grep -oE 'photo set: [^;]*;[^;]*' "$WORK/last.log" | head -1)," \
        "$(du -sh "$d/synth/photos/images" | cut -f1) on disk"
-  row synth "$s" "$kb"
+  synth_s=$s synth_kb=$kb
   read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch")
   texels=$(oiiotool --info "$d/canvas/height.exr" |
              sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
+  row synth "$synth_s" "$synth_kb"  # after preprocess, which tells the canvas's texels
   row preprocess "$s" "$kb"
   untiled=0
   if [ "$n" -le "$untiled_max" ]; then

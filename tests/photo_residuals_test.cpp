@@ -29,7 +29,7 @@ struct Scenario {
   PhotoSet photos;               // re-rendered below, faults planted by the caller
 };
 
-Scenario MakeScenario(int lights = 6, bool generator_photos = false) {
+Scenario MakeScenario(int lights = 6, bool generator_photos = false, int grid = 0) {
   Scenario s;
   synth::PaintingOptions po;
   po.resolution_px = 160;
@@ -43,6 +43,7 @@ Scenario MakeScenario(int lights = 6, bool generator_photos = false) {
     so.encoding = synth::PhotoEncoding::kLinearExr;
   }
   so.pixels_per_texel = 2.07;  // not a whole number: shifts are not whole pixels either
+  so.grid_cols = so.grid_rows = grid;
   s.sim = synth::SimulatePhotoSet(scene, RigidTransform{}, so);
   s.photos = s.sim.fit;
   return s;
@@ -185,6 +186,20 @@ TEST(PhotoResiduals, GeneratorPhotosOfTheTruthAreClean) {
     EXPECT_NEAR(p.gain, 1.0, kCleanGainTol) << p.entry;
     EXPECT_LT(p.shift_px, kCleanShiftTolPx) << p.entry;
     EXPECT_EQ(p.flags, 0) << p.entry;
+  }
+  EXPECT_TRUE(r.Warnings().empty());
+}
+
+// A tiled photo set (a camera above each of 2 x 2 cells, each image a part of the canvas with the
+// frame along two sides, lights around each cell): the same, no photo is called off. (The fitted
+// case that once was: tests/tiles_test.cpp, TiledPhotoSet.NoPhotoOfAFittedGridIsCalledOff.)
+TEST(PhotoResiduals, GridOfGeneratorPhotosOfTheTruthIsClean) {
+  const Scenario s = MakeScenario(8, true, 2);
+  const PhotoResidualReport r = Check(s);
+  ASSERT_EQ(r.photos.size(), 32u);
+  for (const PhotoResidual& p : r.photos) {
+    EXPECT_NEAR(p.gain, 1.0, 2 * kCleanGainTol) << p.entry;
+    EXPECT_EQ(p.flags & (kResidualShifted | kResidualGainOff), 0) << p.entry;
   }
   EXPECT_TRUE(r.Warnings().empty());
 }

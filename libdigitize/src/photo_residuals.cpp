@@ -159,6 +159,19 @@ Gain MeasureGain(const Grid<Vec3f>& relit, const Grid<Vec3f>& photo, const Grid<
   return gain;
 }
 
+// RMS (linear, all channels) of photo - gain * relit over `use`; 0 when nothing is used.
+double RmsAfterGain(const Grid<Vec3f>& relit, const Grid<Vec3f>& photo, const Grid<uint8_t>& use,
+                    double gain) {
+  double sse = 0;
+  size_t n = 0;
+  for (size_t p = 0; p < use.size(); ++p) {
+    if (!use.data[p]) continue;
+    sse += (photo.data[p].cast<double>() - gain * relit.data[p].cast<double>()).squaredNorm();
+    ++n;
+  }
+  return n ? std::sqrt(sse / (3.0 * static_cast<double>(n))) : 0.0;
+}
+
 std::string Name(const PhotoResidual& r) { return r.path + " (" + r.entry + ")"; }
 
 }  // namespace
@@ -178,6 +191,8 @@ Status PhotoResidualOptions::Validate() const {
     return bad("max_shift_px", "> 0", max_shift_px);
   if (!(min_shift_response >= 0 && min_shift_response <= 1))
     return bad("min_shift_response", "in [0, 1]", min_shift_response);
+  if (!(min_shift_improvement >= 0 && min_shift_improvement < 1))
+    return bad("min_shift_improvement", "in [0, 1)", min_shift_improvement);
   if (max_correlation_side_px < 16)
     return bad("max_correlation_side_px", ">= 16", max_correlation_side_px);
   if (num_threads < 0) return bad("num_threads", ">= 0", num_threads);
@@ -239,7 +254,6 @@ Result<PhotoResidualReport> CheckPhotoResiduals(const HeightField& canvas,
       if (!shift.measured || shift.response < options.min_shift_response) {
         r.flags |= kResidualShiftWeak;
       } else if (r.shift_px > options.max_shift_px) {
-        r.flags |= kResidualShifted;
         // Misregistered pixels compare texels with their neighbours, which biases the ratios
         // (2 % at 4 texels): the gain is measured again on the relit image moved onto the photo.
         Grid<Vec3f> moved;
@@ -247,9 +261,24 @@ Result<PhotoResidualReport> CheckPhotoResiduals(const HeightField& canvas,
         Register(relit.rgb, relit.mask, shift.x, shift.y, moved, moved_use);
         for (size_t p = 0; p < moved_use.size(); ++p)
           if (!photo.flags.empty() && photo.flags.data[p]) moved_use.data[p] = 0;
-        if (const Gain registered = MeasureGain(moved, photo.rgb, moved_use, options);
-            registered.measured)
+        const Gain registered = MeasureGain(moved, photo.rgb, moved_use, options);
+        // A real misregistration: the relit image moved by the shift matches the photo better.
+        // A spurious correlation peak (large flat regions, a part of the canvas in a corner of
+        // the photo) does not, and is no warning.
+        // Compared over the pixels both cover: a large shift leaves only a corner of the photo,
+        // whose RMS says nothing about the rest.
+        Grid<uint8_t> both = use;
+        size_t common = 0;
+        for (size_t p = 0; p < both.size(); ++p) common += both.data[p] &= moved_use.data[p];
+        const double before = RmsAfterGain(relit.rgb, photo.rgb, both, gain.gain);
+        const double after = RmsAfterGain(moved, photo.rgb, both, registered.gain);
+        if (registered.measured && common >= options.min_pixels &&
+            after < (1.0 - options.min_shift_improvement) * before) {
+          r.flags |= kResidualShifted;
           gain = registered;
+        } else {
+          r.flags |= kResidualShiftWeak;
+        }
       }
     }
     r.gain = gain.gain;

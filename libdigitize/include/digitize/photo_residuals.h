@@ -11,9 +11,10 @@
 //     bounding box of the canvas in the relit image; pixels inside the box that do not see the
 //     canvas or are flagged take the image's mean there, so the canvas outline (the same in
 //     both: it comes from the relit mask) carries no weight. A camera pose that is off shows here.
-//     Beyond max_shift_px, the gain is measured again on the relit image moved by the shift onto
-//     the photo (bilinear): misregistered pixels compare neighbouring texels, which biased the
-//     ratio by 2 % at a 4-texel shift;
+//     Beyond max_shift_px, the relit image is moved by the shift onto the photo (bilinear): the
+//     shift is reported only when the moved image matches the photo better (residual RMS after
+//     the gain, min_shift_improvement), and the gain is then measured again on it: misregistered
+//     pixels compare neighbouring texels, which biased the ratio by 2 % at a 4-texel shift;
 //   - residual RMS (linear, all channels, unclipped) before and after applying the gain.
 // A shift is given in photo pixels (x right, y down: the photo's content sits at relit + shift),
 // and in mm and texels on the canvas from the camera's local scale at the canvas centre.
@@ -57,6 +58,12 @@ struct PhotoResidualOptions {
   // Below this phase-correlation peak (0..1) the shift is not trusted (flag kResidualShiftWeak,
   // no shift warning): a flat, textureless image correlates with anything.
   double min_shift_response = 0.02;
+  // A shift beyond max_shift_px is reported only when the relit image moved by it matches the
+  // photo better: its residual RMS (after the gain) at most (1 - this) of the unmoved one's. A
+  // real misregistration of a few pixels more than halves it (photo_residuals_test); a spurious
+  // peak does not lower it at all (a grid camera's photo of a canvas corner under a grazing light
+  // correlated at a 129 px "shift" that made the RMS worse).
+  double min_shift_improvement = 0.1;
   // Images (the canvas's bounding box) larger than this along either side are averaged down by
   // an integer factor for the correlation (the shift is scaled back): bounds the FFT.
   int max_correlation_side_px = 1024;
@@ -71,7 +78,8 @@ enum PhotoResidualFlag : uint8_t {
   kResidualTooFewPixels = 1,  // fewer than min_pixels well-exposed canvas pixels: not judged
   kResidualGainOff = 2,       // |ln gain| > max_abs_log_gain
   kResidualShifted = 4,       // shift > max_shift_px (and the correlation is trusted)
-  kResidualShiftWeak = 8,     // correlation peak below min_shift_response: shift not trusted
+  kResidualShiftWeak = 8,     // correlation peak below min_shift_response, or moving the relit
+                              // image by the shift does not match the photo better: not trusted
 };
 
 struct PhotoResidual {
