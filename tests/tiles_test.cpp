@@ -303,10 +303,9 @@ TEST(TiledPhotoSet, AGridOfJpegPhotosFitsInTilesAsAWhole) {
       Cli("fit --canvas " + canvas + " --photos " + photos + held + " -o " + (d / "fit").string());
   ASSERT_EQ(fit.exit_code, 0) << fit.text;
   const std::string plan = (d / "grid.plan.json").string();
-  ASSERT_EQ(Cli("tiles plan --canvas " + canvas + " --photos " + photos + " -o " +
-                (d / "grid.pack.exr").string() + " --plan " + plan + " --tile-size 50")
-                .exit_code,
-            0);
+  CliRun planned = Cli("tiles plan --canvas " + canvas + " --photos " + photos + " -o " +
+                       (d / "grid.pack.exr").string() + " --plan " + plan + " --tile-size 50");
+  ASSERT_EQ(planned.exit_code, 0) << planned.text;
   CliRun run = Cli("tiles run " + plan + " --all");
   ASSERT_EQ(run.exit_code, 0) << run.text;
   ASSERT_EQ(Cli("tiles merge " + plan).exit_code, 0);
@@ -321,6 +320,27 @@ TEST(TiledPhotoSet, AGridOfJpegPhotosFitsInTilesAsAWhole) {
   ASSERT_TRUE(std::regex_search(log, m, used)) << log;
   EXPECT_GE(std::stoi(m[1]), 12);
   EXPECT_LE(std::stoi(m[1]), 24);
+  // The plan says the largest halo a job will read (the jobs' own, from run.log), and that
+  // 50-texel tiles are more than 4 halos (2 mm texels: a few texels of shadow reach): no hint.
+  int largest = 0;
+  const std::regex halo("halo ([0-9]+),");
+  for (auto it = std::sregex_iterator(log.begin(), log.end(), halo); it != std::sregex_iterator();
+       ++it)
+    largest = std::max(largest, std::stoi((*it)[1]));
+  ASSERT_TRUE(std::regex_search(planned.text, m, std::regex("halo: up to ([0-9]+) texels")))
+      << planned.text;
+  EXPECT_EQ(std::stoi(m[1]), largest) << planned.text << log;
+  EXPECT_LE(4 * largest, 50);
+  EXPECT_EQ(planned.text.find("hint: --tile-size"), std::string::npos) << planned.text;
+  // Tiles of 16 texels are under 4 halos: the plan suggests a size of at least 4 halos.
+  CliRun small = Cli("tiles plan --canvas " + canvas + " --photos " + photos + " -o " +
+                     (d / "small.pack.exr").string() + " --plan " +
+                     (d / "small.plan.json").string() + " --tile-size 16");
+  ASSERT_EQ(small.exit_code, 0) << small.text;
+  ASSERT_GT(4 * largest, 16);
+  ASSERT_TRUE(std::regex_search(small.text, m, std::regex("hint: --tile-size ([0-9]+)")))
+      << small.text;
+  EXPECT_GE(std::stoi(m[1]), 4 * largest);
   // The cells' seams lose no texel: within 8 texels of where one camera's cell ends and the next
   // begins (the canvas's middle row and column), every texel got enough samples for a fit. (Near
   // the canvas's edge the frame's shadows can leave a texel fewer than 8 samples under 12 lights,

@@ -313,24 +313,45 @@ PixelRect BoxPixels(const Camera& camera, const RigidTransform& canvas_from_scan
           static_cast<int>(y1 - y0)};
 }
 
+}  // namespace
+
+int TileHaloTexels(const TilePlan& plan, const TexelRect& tile, const PhotoSet& set,
+                   const RigidTransform& canvas_from_scan, double pitch) {
+  // A ray from a tile texel (at >= the canvas's lowest height) climbing at least at the set's
+  // flattest elevation is above the highest relief within `reach` mm.
+  const double sin_e = MinSinElevation(
+      set, canvas_from_scan, TileBox(plan, tile, pitch, plan.min_height_mm, plan.max_height_mm));
+  const int whole_canvas = std::max(plan.canvas_width, plan.canvas_height);
+  if (sin_e < kMinSinElevation) return whole_canvas;
+  const double tan_e = sin_e / std::sqrt(1.0 - sin_e * sin_e);
+  const double reach_mm = (plan.max_height_mm - plan.min_height_mm) / tan_e;
+  return static_cast<int>(
+      std::min<double>(whole_canvas, std::ceil(reach_mm / pitch) + kHaloSlackTexels));
+}
+
+Result<int> LargestTileHalo(const TilePlan& plan) {
+  PhotoSetOptions headers_only = plan.photo;
+  headers_only.load_pixels = false;
+  auto photos = ReadPhotoSetFile(plan.photos, headers_only);
+  if (!photos.ok()) return photos.error();
+  ImageRegionReader reader(64);
+  auto frame = ReadPreprocessWindow(plan.canvas, 0, 0, 1, 1, reader);
+  if (!frame.ok()) return frame.error();
+  int largest = 0;
+  for (const TexelRect& tile : plan.tiles)
+    largest = std::max(largest, TileHaloTexels(plan, tile, *photos, frame->canvas_from_scan,
+                                               frame->field.pitch_mm));
+  return largest;
+}
+
+namespace {
+
 Result<TileInputs> ReadTileInputs(const TilePlan& plan, size_t index, const PhotoSet& whole,
                                   const RigidTransform& canvas_from_scan, double pitch,
                                   ImageRegionReader& reader) {
   const TexelRect& tile = plan.tiles[index];
   TileInputs in;
-  // Halo: a ray from a tile texel (at >= the canvas's lowest height) climbing at least at the
-  // set's flattest elevation is above the highest relief within `reach` mm.
-  const double sin_e = MinSinElevation(
-      whole, canvas_from_scan, TileBox(plan, tile, pitch, plan.min_height_mm, plan.max_height_mm));
-  const int whole_canvas = std::max(plan.canvas_width, plan.canvas_height);
-  if (sin_e < kMinSinElevation) {
-    in.halo = whole_canvas;
-  } else {
-    const double tan_e = sin_e / std::sqrt(1.0 - sin_e * sin_e);
-    const double reach_mm = (plan.max_height_mm - plan.min_height_mm) / tan_e;
-    in.halo = static_cast<int>(
-        std::min<double>(whole_canvas, std::ceil(reach_mm / pitch) + kHaloSlackTexels));
-  }
+  in.halo = TileHaloTexels(plan, tile, whole, canvas_from_scan, pitch);
   const int x0 = std::max(0, tile.x - in.halo), y0 = std::max(0, tile.y - in.halo);
   const int x1 = std::min(plan.canvas_width, tile.x + tile.width + in.halo);
   const int y1 = std::min(plan.canvas_height, tile.y + tile.height + in.halo);

@@ -86,6 +86,24 @@ void AddPlan(CLI::App* tiles, int& exit_code) {
                 EscapeForTerminal(plan->file.string()).c_str(), plan->canvas_width,
                 plan->canvas_height, plan->tiles.size(), plan->tile_size,
                 EscapeForTerminal(plan->work.string()).c_str());
+    // The window a job reads is its tile and this halo all round: with a tile side under 4 halos
+    // a job spends more on its window (reading, tracer, horizons) than on its tile.
+    if (auto halo = LargestTileHalo(*plan); halo.ok()) {
+      const int t = plan->tile_size, h = *halo;
+      const double window = (t + 2.0 * h) * (t + 2.0 * h) / (static_cast<double>(t) * t);
+      std::printf(
+          "halo: up to %d texels around a tile (shadows and hidden strips of the relief): "
+          "a job reads up to %.1fx its tile\n",
+          h, window);
+      if (t < 4 * h && 4 * h <= kMaxTileSize) {
+        // The next multiple of 256 (whole pack tiles): larger tiles cost memory per job.
+        const int suggest = (4 * h + 255) / 256 * 256;
+        std::printf(
+            "hint: --tile-size %d (at least 4 halos) keeps a job's window under 2.3x its "
+            "tile; the fit's time per texel then stays flat (docs/cluster.md)\n",
+            std::min(suggest, kMaxTileSize));
+      }
+    }
     std::printf("next: digitize tiles run %s --all   (or: digitize tiles sbatch %s)\n",
                 EscapeForTerminal(plan->file.string()).c_str(),
                 EscapeForTerminal(plan->file.string()).c_str());

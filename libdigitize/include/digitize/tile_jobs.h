@@ -67,6 +67,17 @@ struct TileRunReport {
 Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
                                const ProgressCallback& progress = nullptr);
 
+// The halo (texels) a job reads around `tile`: as far as a ray from a tile texel towards a light
+// or camera of `set` can run under the relief's top, (highest - lowest height) / tan(flattest
+// elevation over the tile's corners) + 2; the whole canvas when a light or camera is within 1
+// degree of the canvas plane. Fixed in mm, so it grows in texels as the pitch shrinks.
+int TileHaloTexels(const TilePlan& plan, const TexelRect& tile, const PhotoSet& set,
+                   const RigidTransform& canvas_from_scan, double pitch);
+// The largest halo over the plan's tiles (the photo set's headers and the canvas's transform are
+// read): `tiles plan` says it, since a tile side under ~4x it makes the jobs read more window
+// than tile.
+Result<int> LargestTileHalo(const TilePlan& plan);
+
 struct TileMergeReport {
   ReflectanceFitReport fit;  // the tiles' reports summed (times: summed over the tiles)
   PackSummary pack;          // of the written pack
