@@ -256,6 +256,7 @@ TEST(CanvasOptions, RejectsAbsurdValuesNamingTheOption) {
       {[](CanvasOptions& o) { o.seed_x = 5; }, "seed"},
       {[](CanvasOptions& o) { o.seed_x = -7, o.seed_y = -7; }, "seed"},
       {[](CanvasOptions& o) { o.min_canvas_fraction = 1.5; }, "min_canvas_fraction"},
+      {[](CanvasOptions& o) { o.max_frame_points = 10; }, "max_frame_points"},
   };
   for (const Case& c : cases) {
     CanvasOptions o;
@@ -618,7 +619,9 @@ TEST(ExtractCanvasSynthetic, PinholeNoFrameAndFlatCanvas) {
 // straight on, width and gap come from the top's 10 % and 90 % quantiles of evenly sampled
 // points (1 mm); at 45 degrees the top is sampled unevenly (its slopes face the scanner or not),
 // so 5 mm, which moves a shadow's edge by less than 2 texels here. Without a frame the sides drop
-// to the wall: no box.
+// to the wall: no box. The same bounds hold with the frame's points thinned to 2000 a side
+// (CanvasOptions::max_frame_points; here ~10-40k a side): the points kept must spread over the
+// whole band, not be the first rows of it.
 TEST(ExtractCanvasSynthetic, FrameBoxesMatchTheFrame) {
   for (double tilt : {0.0, 45.0}) {
     SynthCase c;
@@ -627,32 +630,36 @@ TEST(ExtractCanvasSynthetic, FrameBoxesMatchTheFrame) {
     c.frame.raise_mm = 30;
     c.scan.tilt_deg = tilt;
     const SynthRun run = RunSynth(c);
-    const Result<CanvasResult> r = ExtractCanvas(run.scan, CanvasOptions{});
-    ASSERT_TRUE(r.ok()) << r.error().message;
-    const FrameBoxes truth = c.frame.Boxes();
-    // The measured outline's sides in the true canvas frame.
-    const RigidTransform truth_from_measured =
-        run.truth.canvas_from_scan * r->canvas_from_scan.Inverse();
-    const double W = r->extent_mm.x(), H = r->extent_mm.y();
-    const auto to_truth = [&](double X, double Y) {
-      return truth_from_measured.Apply(Vec3d(X, Y, 0));
-    };
-    const double true_gap[4] = {
-        to_truth(0, H / 2).x(), c.painting.width_mm - to_truth(W, H / 2).x(),
-        to_truth(W / 2, 0).y(), c.painting.height_mm - to_truth(W / 2, H).y()};
-    const double tol = tilt == 0 ? 1.0 : 5.0;
-    for (int side = 0; side < 4; ++side) {
-      std::printf(
-          "tilt %.0f, %s: raise %.2f mm (truth %.1f), width %.2f mm (truth %.1f), gap %.2f mm "
-          "(truth %.2f)\n",
-          tilt, kFrameSideNames[side], r->frame.raise_mm[side], truth.raise_mm[side],
-          r->frame.width_mm[side], truth.width_mm[side], r->frame.gap_mm[side], true_gap[side]);
-      EXPECT_NEAR(r->frame.raise_mm[side], truth.raise_mm[side], 0.3)
-          << kFrameSideNames[side] << ", tilt " << tilt;
-      EXPECT_NEAR(r->frame.width_mm[side], truth.width_mm[side], tol)
-          << kFrameSideNames[side] << ", tilt " << tilt;
-      EXPECT_NEAR(r->frame.gap_mm[side], std::max(0.0, true_gap[side]), tol)
-          << kFrameSideNames[side] << ", tilt " << tilt;
+    for (size_t max_points : {size_t{1} << 19, size_t{2000}}) {
+      CanvasOptions options;
+      options.max_frame_points = max_points;
+      const Result<CanvasResult> r = ExtractCanvas(run.scan, options);
+      ASSERT_TRUE(r.ok()) << r.error().message;
+      const FrameBoxes truth = c.frame.Boxes();
+      // The measured outline's sides in the true canvas frame.
+      const RigidTransform truth_from_measured =
+          run.truth.canvas_from_scan * r->canvas_from_scan.Inverse();
+      const double W = r->extent_mm.x(), H = r->extent_mm.y();
+      const auto to_truth = [&](double X, double Y) {
+        return truth_from_measured.Apply(Vec3d(X, Y, 0));
+      };
+      const double true_gap[4] = {
+          to_truth(0, H / 2).x(), c.painting.width_mm - to_truth(W, H / 2).x(),
+          to_truth(W / 2, 0).y(), c.painting.height_mm - to_truth(W / 2, H).y()};
+      const double tol = tilt == 0 ? 1.0 : 5.0;
+      for (int side = 0; side < 4; ++side) {
+        std::printf(
+            "tilt %.0f, %zu points: %s: raise %.2f mm (truth %.1f), width %.2f mm (truth %.1f), "
+            "gap %.2f mm (truth %.2f)\n",
+            tilt, max_points, kFrameSideNames[side], r->frame.raise_mm[side], truth.raise_mm[side],
+            r->frame.width_mm[side], truth.width_mm[side], r->frame.gap_mm[side], true_gap[side]);
+        EXPECT_NEAR(r->frame.raise_mm[side], truth.raise_mm[side], 0.3)
+            << kFrameSideNames[side] << ", tilt " << tilt << ", " << max_points << " points";
+        EXPECT_NEAR(r->frame.width_mm[side], truth.width_mm[side], tol)
+            << kFrameSideNames[side] << ", tilt " << tilt << ", " << max_points << " points";
+        EXPECT_NEAR(r->frame.gap_mm[side], std::max(0.0, true_gap[side]), tol)
+            << kFrameSideNames[side] << ", tilt " << tilt << ", " << max_points << " points";
+      }
     }
   }
   SynthCase c;

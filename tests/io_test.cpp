@@ -103,24 +103,84 @@ bool SameBits(float a, float b) { return std::memcmp(&a, &b, sizeof(float)) == 0
 // ----------------------------------------------------------------------------------------------
 // Round trips
 
+// 23 rows are one band of the reader (scan_io.cpp reads XYZ images 256 rows at a time), 600
+// three: each band lands in its own rows.
 TEST_F(IoTest, ScanExrRoundTripIsBitExactIncludingNaN) {
-  Scan scan = MakeScan(37, 23, 1);
-  scan.xyz_mm(0, 0) = Vec3f::Constant(kMissing);
-  scan.xyz_mm(5, 7).y() = kMissing;  // partial NaN survives as stored
-  scan.xyz_mm(36, 22) = Vec3f(-0.f, std::numeric_limits<float>::denorm_min(), 1e-30f);
-  const fs::path path = Path("scan.exr");
-  ASSERT_TRUE(WriteScanExr(path, scan).ok());
-  EXPECT_EQ(Listing(), std::vector<std::string>{"scan.exr"});  // no temp file left
+  for (int height : {23, 600}) {
+    Scan scan = MakeScan(37, height, 1);
+    scan.xyz_mm(0, 0) = Vec3f::Constant(kMissing);
+    scan.xyz_mm(5, 7).y() = kMissing;  // partial NaN survives as stored
+    scan.xyz_mm(36, height - 1) = Vec3f(-0.f, std::numeric_limits<float>::denorm_min(), 1e-30f);
+    const fs::path path = Path("scan.exr");
+    ASSERT_TRUE(WriteScanExr(path, scan).ok());
+    EXPECT_EQ(Listing(), std::vector<std::string>{"scan.exr"});  // no temp file left
 
-  auto read = ReadScan(path, {});
-  ASSERT_TRUE(read.ok()) << read.error().message;
-  ASSERT_EQ(read->xyz_mm.width, 37);
-  ASSERT_EQ(read->xyz_mm.height, 23);
-  EXPECT_EQ(read->source, path.string());
-  for (size_t i = 0; i < scan.xyz_mm.size(); ++i) {
-    for (int c = 0; c < 3; ++c) {
-      ASSERT_TRUE(SameBits(read->xyz_mm.data[i][c], scan.xyz_mm.data[i][c])) << "sample " << i;
+    auto read = ReadScan(path, {});
+    ASSERT_TRUE(read.ok()) << read.error().message;
+    ASSERT_EQ(read->xyz_mm.width, 37);
+    ASSERT_EQ(read->xyz_mm.height, height);
+    EXPECT_EQ(read->source, path.string());
+    for (size_t i = 0; i < scan.xyz_mm.size(); ++i) {
+      for (int c = 0; c < 3; ++c) {
+        ASSERT_TRUE(SameBits(read->xyz_mm.data[i][c], scan.xyz_mm.data[i][c]))
+            << "sample " << i << " of " << height << " rows";
+      }
     }
+  }
+}
+
+// ReadImageInBands: the bands, in order and of the rows asked for (whole rows of tiles for a
+// tiled file), put together are ReadImage's pixels bit for bit; an error from the consumer stops
+// the read and is returned.
+TEST_F(IoTest, BandsOfAnImageAreTheImage) {
+  const int width = 45, height = 301;
+  std::vector<float> pixels(static_cast<size_t>(width) * height * 3);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-5.f, 5.f);
+  for (float& v : pixels) v = u(rng);
+  for (const bool tiled : {false, true}) {
+    const fs::path path = Path(tiled ? "tiled.exr" : "lines.exr");
+    auto out = OIIO::ImageOutput::create(path.string());
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::FLOAT);
+    if (tiled) spec.tile_width = spec.tile_height = 32;
+    ASSERT_TRUE(out->open(path.string(), spec)) << out->geterror();
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, pixels.data())) << out->geterror();
+    ASSERT_TRUE(out->close());
+    const auto whole = ReadImage(path);
+    ASSERT_TRUE(whole.ok()) << whole.error().message;
+
+    std::vector<float> joined;
+    std::vector<int> starts;
+    const Status read =
+        ReadImageInBands(path, size_t{1} << 20, 50, [&](const FloatImage& band, int y0) {
+          EXPECT_EQ(band.width, width);
+          EXPECT_EQ(band.channels, 3);
+          EXPECT_EQ(band.channel_names, whole->channel_names);
+          starts.push_back(y0);
+          joined.insert(joined.end(), band.pixels.begin(), band.pixels.end());
+          return Status::Ok();
+        });
+    ASSERT_TRUE(read.ok()) << read.message();
+    const std::vector<int> expected = tiled ? std::vector<int>{0, 64, 128, 192, 256}
+                                            : std::vector<int>{0, 50, 100, 150, 200, 250, 300};
+    EXPECT_EQ(starts, expected) << path;
+    ASSERT_EQ(joined.size(), whole->pixels.size()) << path;
+    EXPECT_EQ(std::memcmp(joined.data(), whole->pixels.data(), joined.size() * sizeof(float)), 0)
+        << path;
+
+    int calls = 0;
+    const Status stopped = ReadImageInBands(path, size_t{1} << 20, 50, [&](const FloatImage&, int) {
+      ++calls;
+      return Status(Error{"enough"});
+    });
+    EXPECT_FALSE(stopped.ok());
+    EXPECT_EQ(stopped.message(), "enough");
+    EXPECT_EQ(calls, 1);
+    const Status too_large =
+        ReadImageInBands(path, 1000, 50, [](const FloatImage&, int) { return Status::Ok(); });
+    ASSERT_FALSE(too_large.ok());
+    ExpectErrorAbout(too_large.message(), path, "too large");
   }
 }
 

@@ -105,9 +105,13 @@ check_format() {
   fi
 }
 
+# The sanitized builds' optimisation and debug info (see the ASan build in `test`).
+sanitized_flags=(-DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
+
 # The libFuzzer targets (tests/fuzz/): clang, ASan+UBSan, only the library sources they need.
 build_fuzzers() {
-  CC=clang CXX=clang++ configure build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_FUZZ=ON
+  CC=clang CXX=clang++ configure build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_FUZZ=ON \
+    "${sanitized_flags[@]}"
   cmake --build build-fuzz -j "$jobs"
 }
 
@@ -170,8 +174,13 @@ case "$cmd" in
     configure build -DCMAKE_BUILD_TYPE=Release
     cmake --build build -j "$jobs"
     run_tests build "Release"
-    # Sanitizers: RelWithDebInfo keeps the suite fast enough; halt on the first UBSan report.
-    configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_SANITIZE=ON -DDIGITIZE_BUILD_BENCH=OFF
+    # Sanitizers: optimised so the suite runs fast enough; halt on the first UBSan report.
+    # -O1 -g1, not RelWithDebInfo's -O2 -g: UBSan's checks make GCC's -O2 and full debug info
+    # the bulk of a cold build (scan_registration.cpp: 182 s at -O2 -g, 72 s at -O1 -g1; the
+    # sanitized build was most of a 79-minute CI run after a header change). Line tables are all
+    # the sanitizers' stack traces need.
+    configure build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDIGITIZE_SANITIZE=ON -DDIGITIZE_BUILD_BENCH=OFF \
+      "${sanitized_flags[@]}"
     cmake --build build-asan -j "$jobs"
     # intercept_tls_get_addr=0: GCC 12's __tls_get_addr interceptor takes a dynamic TLS block that
     # happens to start 16 bytes past a page for a pre-2.25 glibc header and reads a bogus range;

@@ -207,18 +207,19 @@ Status CanvasOptions::Validate() const {
   if (!(min_canvas_fraction >= 0 && min_canvas_fraction <= 1))
     return fail("min_canvas_fraction must be in [0, 1], got " +
                 std::to_string(min_canvas_fraction));
+  if (max_frame_points < 1000)
+    return fail("max_frame_points must be >= 1000, got " + std::to_string(max_frame_points));
   return Status::Ok();
 }
 
-Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& options) {
-  using namespace canvas_detail;
-  const std::string src = SourceName(scan);
-  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
-  const Grid<Vec3f>& xyz = scan.xyz_mm;
-  const int w = xyz.width, h = xyz.height;
-  if (xyz.empty() || xyz.data.size() != static_cast<size_t>(w) * static_cast<size_t>(h))
-    return Error{src + ": empty scan (" + std::to_string(w) + "x" + std::to_string(h) + ")"};
+namespace {
 
+// Steps 1-6: the canvas's plane, mask, frame of reference and extent. A function of its own so
+// the steps' masks (a byte per scan sample each) are gone before step 7 scans the frame.
+Result<CanvasResult> LocateCanvas(const Grid<Vec3f>& xyz, const CanvasOptions& options,
+                                  const std::string& src) {
+  using namespace canvas_detail;
+  const int w = xyz.width, h = xyz.height;
   Result<PlaneFit> rough = FitRoughPlane(xyz, src);
   if (!rough.ok()) return rough.error();
   Result<GrownRegion> region = GrowCanvasRegion(xyz, *rough, options, src);
@@ -231,8 +232,13 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
       EstimateNoiseSigma(xyz, fitted->fit_mask, fitted->fit_mask_count, frame);
   RefinedBoundary boundary =
       RefineBoundary(xyz, *region, frame, noise_sigma, fitted->fit_mask_count, options);
+  // Each step's masks (a byte per scan sample) go once no later step reads them.
+  region->grow.release();
   const Outline outline = FitOutline(xyz, boundary.mask, region->valid, fitted->fit_mask, frame,
                                      noise_sigma, std::min(boundary.spacing_x, boundary.spacing_y));
+  region->valid.release();
+  fitted->fit_mask.release();
+  if (outline.ok) boundary.mask.release();
   const cv::Mat& final_mask = outline.ok ? outline.mask : boundary.mask;
 
   // ---- 6. Canvas frame.
@@ -264,10 +270,24 @@ Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& option
   }
   result.seed_x = region->seed_x;
   result.seed_y = region->seed_y;
+  return result;
+}
 
+}  // namespace
+
+Result<CanvasResult> ExtractCanvas(const Scan& scan, const CanvasOptions& options) {
+  const std::string src = SourceName(scan);
+  if (Status st = options.Validate(); !st.ok()) return Error{src + ": " + st.message()};
+  const Grid<Vec3f>& xyz = scan.xyz_mm;
+  const int w = xyz.width, h = xyz.height;
+  if (xyz.empty() || xyz.data.size() != static_cast<size_t>(w) * static_cast<size_t>(h))
+    return Error{src + ": empty scan (" + std::to_string(w) + "x" + std::to_string(h) + ")"};
+  Result<CanvasResult> result = LocateCanvas(xyz, options, src);
+  if (!result.ok()) return result;
   // ---- 7. The frame's boxes.
-  result.frame = MeasureFrameBoxes(xyz, result.mask_scan, result.canvas_from_scan, result.extent_mm,
-                                   noise_sigma);
+  result->frame = canvas_detail::MeasureFrameBoxes(xyz, result->mask_scan, result->canvas_from_scan,
+                                                   result->extent_mm, result->noise_sigma_mm,
+                                                   options.max_frame_points);
   return result;
 }
 

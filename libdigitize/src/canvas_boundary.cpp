@@ -73,20 +73,26 @@ void JoinMissingSamples(const cv::Mat& filled, const cv::Mat& valid, cv::Mat& fi
   cv::Mat add;
   cv::bitwise_and(filled, missing, add);
   final_mask.setTo(255, add);
-  auto reach = [&](int kw, int kh, cv::Point anchor) {
-    cv::Mat out;
+  // Four dilations of the mask, two kept at a time (a byte per scan sample each).
+  auto reach = [&](int kw, int kh, cv::Point anchor, cv::Mat& out) {
     cv::dilate(final_mask, out, cv::Mat::ones(kh, kw, CV_8U), anchor, 1, cv::BORDER_CONSTANT,
                cv::Scalar(0));
-    return out;
   };
   const int r = kConvexReachPx;
-  cv::Mat left = reach(r + 1, 1, cv::Point(r, 0)), right = reach(r + 1, 1, cv::Point(0, 0));
-  cv::Mat up = reach(1, r + 1, cv::Point(0, r)), down = reach(1, r + 1, cv::Point(0, 0));
-  cv::bitwise_and(left, right, left);
-  cv::bitwise_and(up, down, up);
-  cv::bitwise_or(left, up, add);
+  cv::Mat both, other;
+  reach(r + 1, 1, cv::Point(r, 0), both);   // a mask pixel to the left
+  reach(r + 1, 1, cv::Point(0, 0), other);  // and to the right
+  cv::bitwise_and(both, other, add);
+  reach(1, r + 1, cv::Point(0, r), both);   // or above
+  reach(1, r + 1, cv::Point(0, 0), other);  // and below
+  cv::bitwise_and(both, other, both);
+  other.release();
+  cv::bitwise_or(add, both, add);
+  both.release();
   cv::bitwise_and(add, missing, add);
   final_mask.setTo(255, add);
+  add.release();
+  missing.release();
   const cv::Mat holes = EnclosedIslands(final_mask);
   cv::bitwise_or(final_mask, holes, final_mask);
 }

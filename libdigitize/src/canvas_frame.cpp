@@ -38,24 +38,42 @@ double Quantile(std::vector<double>& v, double q) {
 
 FrameBoxes MeasureFrameBoxes(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask_scan,
                              const RigidTransform& canvas_from_scan,
-                             const Eigen::Vector2d& extent_mm, double noise_sigma_mm) {
+                             const Eigen::Vector2d& extent_mm, double noise_sigma_mm,
+                             size_t max_points) {
   const double W = extent_mm.x(), H = extent_mm.y();
-  // Per side: (outward distance, height) of the points in its band.
-  std::array<std::vector<std::array<double, 2>>, 4> band;
   const Mat3d R = canvas_from_scan.rotation;
   const Vec3d t = canvas_from_scan.translation;
-  for (size_t i = 0; i < xyz.data.size(); ++i) {
-    if (mask_scan.data[i] || !Usable(xyz.data[i])) continue;
+  // The side of the frame sample i lies beside (-1: none), its outward distance and height.
+  auto classify = [&](size_t i, double* d, double* z) {
+    if (mask_scan.data[i] || !Usable(xyz.data[i])) return -1;
     const Vec3d p = R * xyz.data[i].cast<double>() + t;
     const bool in_x = p.x() >= 0 && p.x() <= W, in_y = p.y() >= 0 && p.y() <= H;
     // Corners (outside along both axes) belong to no side: they hold the mitre, seen obliquely.
     int side = -1;
-    double d = 0;
-    if (in_y && p.x() < 0) side = 0, d = -p.x();
-    if (in_y && p.x() > W) side = 1, d = p.x() - W;
-    if (in_x && p.y() < 0) side = 2, d = -p.y();
-    if (in_x && p.y() > H) side = 3, d = p.y() - H;
-    if (side >= 0 && d <= kFrameBandMm) band[side].push_back({d, p.z()});
+    if (in_y && p.x() < 0) side = 0, *d = -p.x();
+    if (in_y && p.x() > W) side = 1, *d = p.x() - W;
+    if (in_x && p.y() < 0) side = 2, *d = -p.y();
+    if (in_x && p.y() > H) side = 3, *d = p.y() - H;
+    *z = p.z();
+    return side >= 0 && *d <= kFrameBandMm ? side : -1;
+  };
+  // Per side, every stride-th of its points (in scan order: an even spread over the band), at
+  // most max_points (CanvasOptions::max_frame_points).
+  std::array<size_t, 4> count{};
+  double out = 0, height = 0;
+  for (size_t i = 0; i < xyz.data.size(); ++i)
+    if (const int side = classify(i, &out, &height); side >= 0) ++count[static_cast<size_t>(side)];
+  std::array<size_t, 4> stride{}, seen{};
+  std::array<std::vector<std::array<double, 2>>, 4> band;  // (outward distance, height)
+  for (size_t s = 0; s < 4; ++s) {
+    stride[s] = (count[s] + max_points - 1) / max_points;
+    band[s].reserve(stride[s] ? count[s] / stride[s] + 1 : 0);
+  }
+  for (size_t i = 0; i < xyz.data.size(); ++i) {
+    const int side = classify(i, &out, &height);
+    if (side < 0) continue;
+    const auto s = static_cast<size_t>(side);
+    if (seen[s]++ % stride[s] == 0) band[s].push_back({out, height});
   }
   FrameBoxes boxes;
   const double min_raise = std::max(kMinRaiseMm, 6.0 * noise_sigma_mm);

@@ -138,9 +138,11 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
 // raise is a high quantile of their heights (the moulding's top; a quantile, so that a few
 // spikes do not lift it), its width from a quantile of the outward distance of the points above
 // half that raise (canvas_frame.cpp says why). A side with too few points, or whose raise is within
-// the scan noise of the canvas plane, gets no box.
+// the scan noise of the canvas plane, gets no box. Quantiles of at most max_points a side, evenly
+// spaced (CanvasOptions::max_frame_points).
 FrameBoxes MeasureFrameBoxes(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask_scan,
                              const RigidTransform& canvas_from_scan,
-                             const Eigen::Vector2d& extent_mm, double noise_sigma_mm);
+                             const Eigen::Vector2d& extent_mm, double noise_sigma_mm,
+                             size_t max_points);
 
 }  // namespace digitize::canvas_detail

@@ -463,13 +463,18 @@ Result<ImageHeader> ReadImageHeader(const fs::path& path) {
   return header;
 }
 
-Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
+namespace {
+
+// OpenImage, then the checks of a reader of pixels (size within max_pixels, before anything is
+// allocated: a corrupt header can claim billions; 1, 3 or 4 channels), and the FloatImage's
+// header fields filled (its pixels left empty).
+Result<std::unique_ptr<OIIO::ImageInput>> OpenForPixels(const fs::path& path, size_t max_pixels,
+                                                        FloatImage* image) {
   const std::string name = path.string();
   auto opened = OpenImage(path);
   if (!opened.ok()) return opened.error();
   std::unique_ptr<OIIO::ImageInput> in = std::move(opened).value();
   const OIIO::ImageSpec& spec = in->spec();
-  // Checked before allocating: a corrupt header can claim billions of pixels.
   const auto pixels = static_cast<uint64_t>(spec.width) * static_cast<uint64_t>(spec.height);
   if (pixels > max_pixels) {
     return Error{name + ": too large, " + std::to_string(spec.width) + "x" +
@@ -482,34 +487,83 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
                  "); only 1-channel (height, mask), 3-channel (X,Y,Z or RGB) or 4-channel (RGBA, "
                  "lobe) images are read"};
   }
-
-  FloatImage image;
-  image.width = spec.width;
-  image.height = spec.height;
-  image.channels = spec.nchannels;
-  image.format = in->format_name();
-  image.integer_samples = IsIntegerType(spec.format);
-  image.bits_per_sample =
+  image->width = spec.width;
+  image->height = spec.height;
+  image->channels = spec.nchannels;
+  image->format = in->format_name();
+  image->integer_samples = IsIntegerType(spec.format);
+  image->bits_per_sample =
       spec.get_int_attribute("oiio:BitsPerSample", static_cast<int>(spec.format.size() * 8));
-  image.channel_names = spec.channelnames;
+  image->channel_names = spec.channelnames;
   for (const auto& attribute : spec.extra_attribs) {
     if (attribute.type() == OIIO::TypeString) {
-      image.metadata[attribute.name().string()] = attribute.get_string();
+      image->metadata[attribute.name().string()] = attribute.get_string();
     }
   }
+  return in;
+}
+
+bool ResizeFor(FloatImage& image, uint64_t pixels) {
   try {
-    image.pixels.resize(pixels * static_cast<uint64_t>(spec.nchannels));
+    image.pixels.resize(pixels * static_cast<uint64_t>(image.channels));
   } catch (const std::bad_alloc&) {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
+  const std::string name = path.string();
+  FloatImage image;
+  auto opened = OpenForPixels(path, max_pixels, &image);
+  if (!opened.ok()) return opened.error();
+  const std::unique_ptr<OIIO::ImageInput> in = std::move(opened).value();
+  const auto pixels = static_cast<uint64_t>(image.width) * static_cast<uint64_t>(image.height);
+  if (!ResizeFor(image, pixels))
     return Error{name + ": not enough memory for " + std::to_string(pixels) + " pixels"};
-  }
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
-    return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
-  }
-  if (in->has_error()) {
+  if (!in->read_image(0, 0, 0, image.channels, OIIO::TypeDesc::FLOAT, image.pixels.data()) ||
+      in->has_error()) {
     return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
   }
   in->close();
   return image;
+}
+
+Status ReadImageInBands(const fs::path& path, size_t max_pixels, int band_rows,
+                        const std::function<Status(const FloatImage& band, int y0)>& consume) {
+  const std::string name = path.string();
+  FloatImage band;
+  auto opened = OpenForPixels(path, max_pixels, &band);
+  if (!opened.ok()) return Status(opened.error());
+  const std::unique_ptr<OIIO::ImageInput> in = std::move(opened).value();
+  const OIIO::ImageSpec& spec = in->spec();
+  const int height = band.height;
+  // A tiled file is read a row of tiles at a time: bands start on tile boundaries.
+  int rows = std::max(1, band_rows);
+  if (spec.tile_width > 0 && spec.tile_height > 0)
+    rows = (rows + spec.tile_height - 1) / spec.tile_height * spec.tile_height;
+  rows = std::min(rows, height);
+  if (!ResizeFor(band, static_cast<uint64_t>(band.width) * static_cast<uint64_t>(rows)))
+    return Error{name + ": not enough memory for a band of " + std::to_string(rows) + " rows"};
+  for (int y0 = 0; y0 < height; y0 += rows) {
+    band.height = std::min(rows, height - y0);
+    band.pixels.resize(static_cast<size_t>(band.width) * static_cast<size_t>(band.height) *
+                       static_cast<size_t>(band.channels));
+    const int y = spec.y + y0;
+    const bool read = spec.tile_width > 0
+                          ? in->read_tiles(0, 0, spec.x, spec.x + spec.width, y, y + band.height,
+                                           spec.z, spec.z + 1, 0, band.channels,
+                                           OIIO::TypeDesc::FLOAT, band.pixels.data())
+                          : in->read_scanlines(0, 0, y, y + band.height, spec.z, 0, band.channels,
+                                               OIIO::TypeDesc::FLOAT, band.pixels.data());
+    if (!read || in->has_error())
+      return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
+    if (Status st = consume(band, y0); !st.ok()) return st;
+  }
+  in->close();
+  return Status::Ok();
 }
 
 }  // namespace digitize

@@ -115,6 +115,7 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
     if (!merged.ok()) return merged.error();
     scan = std::move(merged).value();
   }
+  exposures = {};  // merged: a scan's worth of memory each
   step("merge", t0,
        Format("merge: %d exposure(s) of %dx%d, %zu samples filled from other exposures, %zu "
               "disagreeing",
@@ -178,6 +179,8 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
               "%zu unfilled in %zu large hole(s)",
               result.field.width(), result.field.height(), result.field.pitch_mm, rs.measured,
               rs.filled, rs.holes_filled, rs.unfilled, rs.holes_unfilled));
+  // Later steps read the canvas grid only: the scan (12 bytes a sample) goes now.
+  scan = Scan();
 
   FinishPreprocess(result, options, progress);
   result.total_seconds = SecondsSince(start);

@@ -29,6 +29,9 @@ namespace fs = std::filesystem;
 constexpr double kMaxCount16 = 65535.0;
 // A PLY header longer than this is not a point grid header but garbage.
 constexpr size_t kMaxPlyHeaderLines = 4096;
+// Rows of an XYZ scan image decoded at a time: a few MB of floats at scanner widths, and enough
+// rows that both cores have work converting each band.
+constexpr int kScanBandRows = 256;
 
 std::string Size(int w, int h) { return std::to_string(w) + "x" + std::to_string(h); }
 
@@ -59,28 +62,37 @@ int FindChannel(const std::vector<std::string>& names, const std::string& axis) 
   return -1;
 }
 
-Result<Scan> ScanFromXyzImage(const fs::path& path, const FloatImage& image) {
-  if (image.integer_samples) {
-    return Error{path.string() + ": 3-channel " + std::to_string(image.bits_per_sample) +
-                 "-bit integer image; an XYZ scan must be float (EXR or TIFF, mm)"};
-  }
-  // OpenEXR stores channels sorted by name and OpenImageIO may reorder them: map by name when the
-  // file names its axes, else take the stored order (R, G, B = X, Y, Z).
-  std::array<int, 3> channel = {FindChannel(image.channel_names, "X"),
-                                FindChannel(image.channel_names, "Y"),
-                                FindChannel(image.channel_names, "Z")};
-  if (std::find(channel.begin(), channel.end(), -1) != channel.end()) channel = {0, 1, 2};
-
+// Read a band at a time into the scan's grid: the file's float copy would be as large as the
+// scan (12 bytes a sample: 1.4 GB for the scan of an 8192-texel canvas).
+Result<Scan> ReadXyzImageScan(const fs::path& path, const ImageHeader& header, size_t max_samples) {
   Scan scan;
   scan.source = path.string();
-  scan.xyz_mm = UnfilledGrid(image.width, image.height);
-  ParallelRows(image.height, [&](int y) {
-    const float* in = image.pixels.data() + scan.xyz_mm.Index(0, y) * 3;
-    Vec3f* out = scan.xyz_mm.Row(y);
-    for (int x = 0; x < image.width; ++x, in += 3) {
-      out[x] = Vec3f(in[channel[0]], in[channel[1]], in[channel[2]]);
-    }
-  });
+  std::array<int, 3> channel{};
+  const Status read = ReadImageInBands(
+      path, max_samples, kScanBandRows, [&](const FloatImage& band, int y0) -> Status {
+        if (y0 == 0) {
+          if (band.integer_samples)
+            return Error{path.string() + ": 3-channel " + std::to_string(band.bits_per_sample) +
+                         "-bit integer image; an XYZ scan must be float (EXR or TIFF, mm)"};
+          // OpenEXR stores channels sorted by name and OpenImageIO may reorder them: map by name
+          // when the file names its axes, else take the stored order (R, G, B = X, Y, Z).
+          channel = {FindChannel(band.channel_names, "X"), FindChannel(band.channel_names, "Y"),
+                     FindChannel(band.channel_names, "Z")};
+          if (std::find(channel.begin(), channel.end(), -1) != channel.end()) channel = {0, 1, 2};
+          // Allocated once the reader has checked the size against max_samples.
+          scan.xyz_mm = UnfilledGrid(header.width, header.height);
+        }
+        if (band.width != scan.xyz_mm.width || y0 + band.height > scan.xyz_mm.height)
+          return Error{path.string() + ": changed while it was read"};
+        ParallelRows(band.height, [&](int y) {
+          const float* in = band.pixels.data() + static_cast<size_t>(y) * band.width * 3;
+          Vec3f* out = scan.xyz_mm.Row(y0 + y);
+          for (int x = 0; x < band.width; ++x, in += 3)
+            out[x] = Vec3f(in[channel[0]], in[channel[1]], in[channel[2]]);
+        });
+        return Status::Ok();
+      });
+  if (!read.ok()) return Error{read.message()};
   return scan;
 }
 
@@ -336,9 +348,11 @@ Result<Scan> ReadPlyScan(const fs::path& path, const ScanReadOptions& options) {
 }
 
 Result<Scan> ReadImageScan(const fs::path& path, const ScanReadOptions& options) {
+  const auto header = ReadImageHeader(path);
+  if (!header.ok()) return header.error();
+  if (header->channels == 3) return ReadXyzImageScan(path, *header, options.max_samples);
   auto image = ReadImage(path, options.max_samples);
   if (!image.ok()) return image.error();
-  if (image->channels == 3) return ScanFromXyzImage(path, *image);
   if (image->channels == 1) return ScanFromDepthImage(path, *image, options);
   return Error{path.string() + ": " + std::to_string(image->channels) +
                " channels, expected 3 (X, Y, Z in mm) or 1 (depth in mm)"};

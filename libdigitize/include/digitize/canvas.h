@@ -35,6 +35,10 @@ struct CanvasOptions {
   int seed_x = -1, seed_y = -1;   // growth seed in scan pixels; -1 = nearest valid to the centre
   double min_canvas_fraction = 0.05;  // a region smaller than this share of the valid samples is
                                       // an error (seed landed on the frame or a speck)
+  // The frame's boxes (step 7) are quantiles of the frame's samples, per side at most this many
+  // (evenly spaced in the scan): beyond ~5e5 their rank error (~1e-3) no longer shrinks, while a
+  // scan's whole frame would hold 16 bytes a sample (1.2 GB for an 8192-texel canvas's scan).
+  size_t max_frame_points = size_t{1} << 19;
   Status Validate() const;
 };
 

@@ -129,6 +129,14 @@ class ImageRegionReader {
 Result<FloatImage> ReadImage(const std::filesystem::path& path,
                              size_t max_pixels = size_t{1} << 28);
 
+// The image a band of rows at a time, in order: `consume(band, y0)` gets rows [y0, y0 +
+// band.height) as ReadImage would give them (band.width and the header fields are the file's).
+// For readers that convert as they go, so that the float copy of a whole large image (12 bytes
+// a pixel for a scan's XYZ) never exists beside what they convert it to. Bands of tiled files
+// are whole rows of tiles. Errors: ReadImage's, or the first one `consume` returns.
+Status ReadImageInBands(const std::filesystem::path& path, size_t max_pixels, int band_rows,
+                        const std::function<Status(const FloatImage& band, int y0)>& consume);
+
 }  // namespace digitize
 
 namespace digitize {
