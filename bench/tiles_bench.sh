@@ -17,6 +17,9 @@
 # A second plan with a tiled pack (PACK_TILE, default 256; 0 skips it) measures the streamed merge
 # (no whole-canvas maps); its pack is checked with `digitize verify` (tests/tiles_test.cpp asserts
 # it equals `digitize pack --pack-tile-size` of the untiled fit, tile for tile).
+# `tiles plan` copies the JPEGs into tiled TIFFs (photo_cache/, its time is the plan's row); with
+# COMPARE_CACHE=1 (default) every tile job also runs from a plan made with --no-photo-cache, just
+# before the cached one, and the two jobs' maps are compared (the row's "identical").
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 root=$PWD
@@ -43,6 +46,7 @@ measure() {
 }
 
 untiled_max=${UNTILED_MAX:-2048}
+compare_cache=${COMPARE_CACHE:-1}
 encoding=${ENCODING:-jpeg}
 echo "size,texels,grid,photos,photo_mpx,stage,seconds,peak_rss_mb,identical" > "$csv"
 printf '%-6s %-10s %-14s %9s %12s\n' size texels stage seconds peak_MB
@@ -95,16 +99,37 @@ for n in "${sizes[@]}"; do
     count=$("$bin" tiles status "$plan" 2>&1 | grep -oE '[0-9]+ of [0-9]+ tiles' |
             head -1 | awk '{print $3}') || true
     if [ "$pt" = 0 ] || [ "$untiled" = 0 ]; then
-      row tiles_plan "$s" "$kb"
-      # Each tile its own process, as an array task: its peak RSS is the job's.
-      total=0 peak=0
+      row tiles_plan "$s" "$kb"  # with the photos' tiled copies (photo_cache/)
+      if [ "$compare_cache" = 1 ]; then
+        "$bin" tiles plan --canvas "$d/canvas" --photos "$d/synth/photos/calib.json" \
+          --plan "$d/direct_$pt.json" --out "$d/direct_$pt.pack.exr" --tile-size "$tile" \
+          --pack-tile-size "$pt" --no-photo-cache > /dev/null
+      fi
+      # Each tile its own process, as an array task: its peak RSS is the job's. With
+      # COMPARE_CACHE, the same tile read from the photos themselves runs just before it (the same
+      # machine state for both), and its maps are compared.
+      total=0 peak=0 direct_total=0 direct_peak=0 same=yes
       for ((i = 0; i < count; ++i)); do
+        if [ "$compare_cache" = 1 ]; then
+          read -r s kb < <(measure "$bin" tiles run "$d/direct_$pt.json" --index "$i" \
+                             --cache-mb "$cache")
+          direct_total=$(awk -v a="$direct_total" -v b="$s" 'BEGIN {print a + b}')
+          [ "$kb" -gt "$direct_peak" ] && direct_peak=$kb
+        fi
         read -r s kb < <(measure "$bin" tiles run "$plan" --index "$i" --cache-mb "$cache")
         total=$(awk -v a="$total" -v b="$s" 'BEGIN {print a + b}')
         [ "$kb" -gt "$peak" ] && peak=$kb
         echo "  tile $i of $count: ${s} s, $((kb / 1024)) MB" >> "$WORK/tiles.log"
+        if [ "$compare_cache" = 1 ]; then
+          t=$(printf 'tile_%05d' "$i")
+          for f in "$d/plan_$pt.tiles/$t"/*.exr; do
+            idiff -fail 0 -warn 0 -a "$f" "$d/direct_$pt.tiles/$t/$(basename "$f")" > /dev/null ||
+              same=no
+          done
+        fi
       done
-      row "tile_jobs_x$count" "$total" "$peak"
+      [ "$compare_cache" = 1 ] && row "tile_jobs_uncached_x$count" "$direct_total" "$direct_peak"
+      row "tile_jobs_x$count" "$total" "$peak" "$([ "$compare_cache" = 1 ] && echo "$same")"
     else
       "$bin" tiles run "$plan" --all --cache-mb "$cache" > "$WORK/last.log" 2>&1
     fi

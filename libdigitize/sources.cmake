@@ -46,12 +46,13 @@ set(DIGITIZE_PREPROCESS_SOURCES
   preprocess_patches.cpp  # PreprocessPatches, the patch list and the registration report
 )
 
-set(DIGITIZE_PHOTOS_HEADERS photo_set.h rti_basis.h rti_export.h)
+set(DIGITIZE_PHOTOS_HEADERS photo_set.h photo_tile_cache.h rti_basis.h rti_export.h)
 set(DIGITIZE_PHOTOS_SOURCES
   photo_calibration.cpp  # calibration JSON: transforms, cameras, lights
   rti_lp.cpp             # RTI .lp light files
   photo_pixels.cpp       # image headers, pixels, colour
   photo_checks.cpp       # camera, light and footprint checks
+  photo_tile_cache.cpp   # tiled copies of PNG / JPEG photos for the tile jobs
   rti_basis.cpp          # PTM / HSH per-pixel fits, relighting, 8-bit sRGB PSNR
   rti_export.cpp         # .ptm (RTIViewer) and relight's info.json + plane_N.jpg (OpenLIME)
 )

@@ -878,9 +878,10 @@ TEST(TiledPack, LevelZeroIsTheSingleGridPack) {
 }
 
 // Every level's tiles hold the prefilter (pack_pyramid.h) of the whole level above, encoded:
-// the writer filters bands of 2 x tile_size rows, and this asserts the bands change nothing --
-// texel for texel, bit for bit, on every level down to 1 x 1 (a 96-texel-wide band pair at level
-// 0 leaves odd rows and columns at several levels).
+// the writer filters each band of tile_size rows as it comes (and gathers the filtered rows into
+// bands of the next level), and this asserts the bands change nothing -- texel for texel, bit
+// for bit, on every level down to 1 x 1 (333 x 201 texels in 64-row bands leave odd rows and
+// columns at several levels, and a last band of 9 rows).
 TEST(TiledPack, EveryLevelIsThePrefilterOfTheWholeLevelAbove) {
   const fs::path dir = TempDir("tiled_levels");
   const Pack p = MakeGgxTestPack(333, 201, 22);

@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "digitize/image_io.h"
+#include "digitize/photo_tile_cache.h"
 #include "test_support.h"
 
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.
@@ -894,6 +896,194 @@ TEST_F(LpTest, DuplicateImagesAndExtraColumnsAreRefusedNamingTheLine) {
   auto entries = ParseRtiLightsText("1\n12 0 0 1\n", "x.lp");
   ASSERT_TRUE(entries.ok()) << entries.error().message;
   EXPECT_EQ(entries->front().image, "12");
+}
+
+// ---- Tiled copies of PNG / JPEG photos (photo_tile_cache.h) ----
+
+class PhotoTileCacheTest : public PhotoSetTest {
+ protected:
+  // A w x h photo of smooth gradients and noise (JPEG keeps some of it), `channels` of `type`.
+  template <class T>
+  void WritePhoto(const std::string& name, int w, int h, int channels, OIIO::TypeDesc type,
+                  uint32_t seed) {
+    std::vector<T> values(static_cast<size_t>(w) * h * channels);
+    const double top = std::numeric_limits<T>::max();
+    uint32_t state = seed;
+    for (size_t i = 0; i < values.size(); ++i) {
+      state = state * 1664525u + 1013904223u;
+      const size_t px = i / channels;
+      const double x = static_cast<double>(px % w) / w, y = static_cast<double>(px / w) / h;
+      const double v = 0.5 + 0.3 * std::sin(9 * x + 3 * (i % channels)) * std::cos(7 * y) +
+                       0.1 * ((state >> 8) / 16777216.0 - 0.5);
+      values[i] = static_cast<T>(std::clamp(v, 0.0, 1.0) * top + 0.5);
+    }
+    WriteImage(name, w, h, channels, type, values);
+  }
+
+  // A set of the named files (headers only, as the tile jobs read it).
+  PhotoSet SetOf(const std::vector<std::string>& names) const {
+    PhotoSet set;
+    for (size_t i = 0; i < names.size(); ++i) {
+      auto header = ReadImageHeader(Path(names[i]));
+      EXPECT_TRUE(header.ok()) << names[i];
+      Photo p;
+      p.path = Path(names[i]);
+      p.entry = "photo " + std::to_string(i);
+      p.camera.width = header.ok() ? header->width : 0;
+      p.camera.height = header.ok() ? header->height : 0;
+      p.camera.fx = p.camera.fy = 1000;
+      set.photos.push_back(p);
+    }
+    return set;
+  }
+};
+
+// A copy is its photo sample for sample: every region (partial tiles at the right and bottom
+// edges, one pixel, the whole) reads back the same floats, the same depth and integer flag, and
+// LoadPhotoRegion converts it to the same linear pixels and flags. PNG 8 / 16 bits, grey and
+// RGB, and JPEG (whose decoder the copy must not re-run differently).
+TEST_F(PhotoTileCacheTest, CopiesReadBackAsTheirPhotos) {
+  WritePhoto<uint8_t>("rgb8.png", 301, 187, 3, OIIO::TypeDesc::UINT8, 1);
+  WritePhoto<uint16_t>("rgb16.png", 301, 187, 3, OIIO::TypeDesc::UINT16, 2);
+  WritePhoto<uint8_t>("grey8.png", 300, 260, 1, OIIO::TypeDesc::UINT8, 3);
+  WritePhoto<uint8_t>("rgb8.jpg", 517, 300, 3, OIIO::TypeDesc::UINT8, 4);
+  ImageRegionReader original(64), copied(64);
+  for (const std::string name : {"rgb8.png", "rgb16.png", "grey8.png", "rgb8.jpg"}) {
+    SCOPED_TRACE(name);
+    const fs::path copy = Path(name + ".tif");
+    ASSERT_TRUE(WriteTiledCopy(Path(name), copy, 128).ok());
+    auto source = ReadImageHeader(Path(name));
+    auto header = ReadImageHeader(copy);
+    ASSERT_TRUE(source.ok() && header.ok());
+    EXPECT_FALSE(source->tiled);
+    EXPECT_TRUE(header->tiled);
+    EXPECT_EQ(header->format, "tiff");
+    EXPECT_EQ(header->width, source->width);
+    EXPECT_EQ(header->height, source->height);
+    EXPECT_EQ(header->channels, source->channels);
+    EXPECT_EQ(header->bits_per_sample, source->bits_per_sample);
+    const int w = source->width, h = source->height;
+    const std::vector<std::array<int, 4>> regions = {
+        {0, 0, w, h}, {w - 45, h - 59, 45, 59}, {100, 120, 1, 1}, {127, 1, 130, 150}};
+    for (const auto& [x, y, rw, rh] : regions) {
+      auto a = original.Read(Path(name), x, y, rw, rh);
+      auto b = copied.Read(copy, x, y, rw, rh);
+      ASSERT_TRUE(a.ok() && b.ok());
+      EXPECT_EQ(a->pixels, b->pixels) << x << ", " << y << " " << rw << " x " << rh;
+      EXPECT_EQ(a->bits_per_sample, b->bits_per_sample);
+      EXPECT_EQ(a->integer_samples, b->integer_samples);
+    }
+    PhotoSet set = SetOf({name});
+    const PixelRect rect{w / 3, h / 4, w / 2, h / 2};
+    auto direct = LoadPhotoRegion(set.photos[0], rect, original);
+    auto via_copy = LoadPhotoRegion(set.photos[0], rect, copied, {}, copy);
+    ASSERT_TRUE(direct.ok() && via_copy.ok());
+    EXPECT_EQ(direct->rgb.data, via_copy->rgb.data);
+    EXPECT_EQ(direct->flags.data, via_copy->flags.data);
+    EXPECT_EQ(direct->encoding, via_copy->encoding);
+    EXPECT_EQ(direct->path, via_copy->path);  // still the photo: its name says it is a JPEG
+  }
+}
+
+// What a copy cannot hold exactly is read as it is: RGBA (alpha), an already tiled file. The
+// copier refuses RGBA itself, naming the file.
+TEST_F(PhotoTileCacheTest, CopiesOnlyWhatItHoldsExactly) {
+  WritePhoto<uint8_t>("rgba.png", 64, 48, 4, OIIO::TypeDesc::UINT8, 5);
+  WritePhoto<uint8_t>("rgb.jpg", 64, 48, 3, OIIO::TypeDesc::UINT8, 6);
+  ASSERT_TRUE(WriteTiledCopy(Path("rgb.jpg"), Path("tiled.tif"), 16).ok());
+  const Status refused = WriteTiledCopy(Path("rgba.png"), Path("rgba.tif"));
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.message().find("rgba.png: 4 channel(s)"), std::string::npos)
+      << refused.message();
+  EXPECT_FALSE(fs::exists(Path("rgba.tif")));
+  EXPECT_FALSE(WriteTiledCopy(Path("rgb.jpg"), Path("odd.tif"), 100).ok());  // not 16k
+  const PhotoSet set = SetOf({"rgba.png", "tiled.tif", "rgb.jpg"});
+  auto made = WritePhotoTileCache(set, Path("cache"));
+  ASSERT_TRUE(made.ok()) << made.error().message;
+  EXPECT_EQ(made->photos, 3u);
+  EXPECT_EQ(made->copied, 1u);
+  EXPECT_EQ(made->direct, 2u);
+  EXPECT_GT(made->bytes, 0u);
+  const auto copies = FindPhotoTileCopies(set, Path("cache"));
+  ASSERT_EQ(copies.size(), 3u);
+  EXPECT_TRUE(copies[0].empty());
+  EXPECT_TRUE(copies[1].empty());
+  EXPECT_EQ(copies[2], Path("cache") / "00002.tif");
+}
+
+// Converted once: a second call keeps every copy; a photo replaced since (other size or time) is
+// read from its own file until the cache is made again, which copies it alone.
+TEST_F(PhotoTileCacheTest, KeepsCurrentCopiesAndIgnoresStaleOnes) {
+  WritePhoto<uint8_t>("a.jpg", 90, 70, 3, OIIO::TypeDesc::UINT8, 7);
+  WritePhoto<uint8_t>("b.png", 90, 70, 3, OIIO::TypeDesc::UINT8, 8);
+  WritePhoto<uint16_t>("c.png", 90, 70, 1, OIIO::TypeDesc::UINT16, 9);
+  const PhotoSet set = SetOf({"a.jpg", "b.png", "c.png"});
+  auto first = WritePhotoTileCache(set, Path("cache"));
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  EXPECT_EQ(first->copied, 3u);
+  const auto copy_time = fs::last_write_time(Path("cache") / "00000.tif");
+  auto second = WritePhotoTileCache(set, Path("cache"));
+  ASSERT_TRUE(second.ok());
+  EXPECT_EQ(second->copied, 0u);
+  EXPECT_EQ(second->kept, 3u);
+  EXPECT_EQ(fs::last_write_time(Path("cache") / "00000.tif"), copy_time);
+  // b.png replaced by another image of the same size, its time moved on.
+  WritePhoto<uint8_t>("b.png", 90, 70, 3, OIIO::TypeDesc::UINT8, 10);
+  fs::last_write_time(Path("b.png"), fs::last_write_time(Path("b.png")) + std::chrono::seconds(5));
+  auto copies = FindPhotoTileCopies(set, Path("cache"));
+  EXPECT_FALSE(copies[0].empty());
+  EXPECT_TRUE(copies[1].empty());
+  EXPECT_FALSE(copies[2].empty());
+  auto third = WritePhotoTileCache(set, Path("cache"));
+  ASSERT_TRUE(third.ok());
+  EXPECT_EQ(third->copied, 1u);
+  EXPECT_EQ(third->kept, 2u);
+  copies = FindPhotoTileCopies(set, Path("cache"));
+  ASSERT_FALSE(copies[1].empty());
+  ImageRegionReader reader(64);
+  auto now = reader.Read(Path("b.png"), 0, 0, 90, 70);
+  auto copy = reader.Read(copies[1], 0, 0, 90, 70);
+  ASSERT_TRUE(now.ok() && copy.ok());
+  EXPECT_EQ(now->pixels, copy->pixels);  // the new image's copy, not the old one
+  // A copy that is gone is not used.
+  fs::remove(copies[2]);
+  EXPECT_TRUE(FindPhotoTileCopies(set, Path("cache"))[2].empty());
+}
+
+// The index is untrusted: a copy name that leaves the folder, a wrong format or broken JSON make
+// the whole cache unused, and the note says why; no folder at all is no note.
+TEST_F(PhotoTileCacheTest, AnIndexThatCannotBeUsedIsIgnored) {
+  WritePhoto<uint8_t>("a.jpg", 40, 30, 3, OIIO::TypeDesc::UINT8, 11);
+  const PhotoSet set = SetOf({"a.jpg"});
+  std::string note = "stale";
+  EXPECT_TRUE(FindPhotoTileCopies(set, Path("none"), &note)[0].empty());
+  EXPECT_EQ(note, "");
+  ASSERT_TRUE(WritePhotoTileCache(set, Path("cache")).ok());
+  ASSERT_FALSE(FindPhotoTileCopies(set, Path("cache"), &note)[0].empty());
+  EXPECT_EQ(note, "");
+  auto index = json::parse(test::ReadFileBytes(Path("cache/index.json")));
+  const json good = index;
+  struct Case {
+    std::string what, text;
+  };
+  json escape = good, format = good, missing = good;
+  escape["copies"][0]["copy"] = "../a.jpg";
+  format["format"] = "something else";
+  missing["copies"][0].erase("mtime_ns");
+  for (const Case& c : std::vector<Case>{{"copy \"../a.jpg\"", escape.dump()},
+                                         {"not a version 1", format.dump()},
+                                         {"without photo", missing.dump()},
+                                         {"not a JSON object", "{\"copies\": ["}}) {
+    test::WriteFileBytes(Path("cache/index.json"), c.text);
+    EXPECT_TRUE(FindPhotoTileCopies(set, Path("cache"), &note)[0].empty()) << c.what;
+    EXPECT_NE(note.find("index.json"), std::string::npos) << note;
+    EXPECT_NE(note.find(c.what), std::string::npos) << note;
+  }
+  // Making the cache again over a broken index copies afresh.
+  auto again = WritePhotoTileCache(set, Path("cache"));
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->copied, 1u);
+  EXPECT_FALSE(FindPhotoTileCopies(set, Path("cache"))[0].empty());
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <fstream>
@@ -306,6 +307,11 @@ TEST(TiledPhotoSet, AGridOfJpegPhotosFitsInTilesAsAWhole) {
   CliRun planned = Cli("tiles plan --canvas " + canvas + " --photos " + photos + " -o " +
                        (d / "grid.pack.exr").string() + " --plan " + plan + " --tile-size 50");
   ASSERT_EQ(planned.exit_code, 0) << planned.text;
+  // The plan copied the 48 JPEGs into tiled TIFFs once; the jobs read every part from them, and
+  // the maps are still digitize fit's (from the JPEGs) bit for bit (below).
+  EXPECT_NE(planned.text.find("photo cache: 48 photos: 48 copied tiled"), std::string::npos)
+      << planned.text;
+  EXPECT_TRUE(fs::exists(d / "grid.plan.tiles/photo_cache/00047.tif"));
   CliRun run = Cli("tiles run " + plan + " --all");
   ASSERT_EQ(run.exit_code, 0) << run.text;
   ASSERT_EQ(Cli("tiles merge " + plan).exit_code, 0);
@@ -315,11 +321,14 @@ TEST(TiledPhotoSet, AGridOfJpegPhotosFitsInTilesAsAWhole) {
   ExpectSameMaps(*merged, *whole, "grid set: merged tiles vs digitize fit");
   // A corner tile is seen by one camera position (12 photos) or two, never by all four.
   const std::string log = ReadFileBytes(d / "grid.plan.tiles/run.log");
-  const std::regex used("tile 0 of 12 fitted .*, ([0-9]+) of 48 photos\\)");
+  const std::regex used(
+      "tile 0 of 12 fitted .*, ([0-9]+) of 48 photos, ([0-9]+) read from "
+      "tiled copies\\)");
   std::smatch m;
   ASSERT_TRUE(std::regex_search(log, m, used)) << log;
   EXPECT_GE(std::stoi(m[1]), 12);
   EXPECT_LE(std::stoi(m[1]), 24);
+  EXPECT_EQ(m[2], m[1]) << log;
   // The plan says the largest halo a job will read (the jobs' own, from run.log), and that
   // 50-texel tiles are more than 4 halos (2 mm texels: a few texels of shadow reach): no hint.
   int largest = 0;
@@ -539,6 +548,18 @@ TEST_F(TilesCli, ThePlanIsUntrustedInput) {
   EXPECT_EQ(TilePlanJson(*plan), ReadFileBytes(PlanFile()));  // the round trip is exact
 
   const std::string good = ReadFileBytes(PlanFile());
+  // What the plan wrote into its work folder (the photos' tiled copies): a refused run adds
+  // nothing to it.
+  const auto listing = [&] {
+    std::vector<std::string> names;
+    if (fs::exists(dir_ / "painting.plan.tiles"))
+      for (const auto& e : fs::recursive_directory_iterator(dir_ / "painting.plan.tiles"))
+        names.push_back(e.path().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  };
+  const std::vector<std::string> planned = listing();
+  EXPECT_TRUE(fs::exists(dir_ / "painting.plan.tiles/photo_cache/index.json"));
   const auto refused = [&](const std::string& text, const std::string& expected) {
     WriteFileBytes(PlanFile(), text);
     auto r = ReadTilePlan(PlanFile());
@@ -547,8 +568,7 @@ TEST_F(TilesCli, ThePlanIsUntrustedInput) {
     EXPECT_NE(r.error().message.find(expected), std::string::npos) << r.error().message;
     CliRun run = Cli("tiles run " + PlanFile() + " --all");
     EXPECT_EQ(run.exit_code, 1) << run.text;
-    EXPECT_FALSE(fs::exists(dir_ / "painting.plan.tiles"))
-        << "a refused plan wrote its work folder";
+    EXPECT_EQ(listing(), planned) << "a refused plan wrote into its work folder";
   };
   const auto replaced = [&](const std::string& from, const std::string& to) {
     std::string t = good;

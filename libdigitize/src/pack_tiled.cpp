@@ -50,14 +50,33 @@ std::vector<std::array<int, 2>> PyramidLevelSizes(int w, int h) {
 
 namespace {
 
+// Texels [x0, x0 + w) x [y0, y0 + h) of a grid.
 template <class T>
-Grid<T> GridRows(const Grid<T>& g, int y0, int rows) {
+Grid<T> GridBlock(const Grid<T>& g, int x0, int y0, int w, int h) {
   Grid<T> out;
-  out.width = g.width;
-  out.height = rows;
-  out.data.assign(g.data.begin() + static_cast<ptrdiff_t>(g.Index(0, y0)),
-                  g.data.begin() + static_cast<ptrdiff_t>(g.Index(0, y0 + rows)));
+  out.width = w;
+  out.height = h;
+  out.data.reserve(static_cast<size_t>(w) * static_cast<size_t>(h));
+  for (int y = y0; y < y0 + h; ++y) {
+    const auto row = g.data.begin() + static_cast<ptrdiff_t>(static_cast<size_t>(y) * g.width + x0);
+    out.data.insert(out.data.end(), row, row + w);
+  }
   return out;
+}
+
+// A block of a pack's grids (the pitch with them) into `field`, `normals`, `maps`.
+void CopyPackBlock(const Pack& pack, int x0, int y0, int w, int h, HeightField& field,
+                   Grid<Vec3f>& normals, ReflectanceMaps& maps) {
+  field.pitch_mm = pack.field.pitch_mm;
+  field.height_mm = GridBlock(pack.field.height_mm, x0, y0, w, h);
+  field.state = GridBlock(pack.field.state, x0, y0, w, h);
+  normals = GridBlock(pack.normals, x0, y0, w, h);
+  maps.rho_d = GridBlock(pack.maps.rho_d, x0, y0, w, h);
+  maps.rho_s = GridBlock(pack.maps.rho_s, x0, y0, w, h);
+  maps.lobe = GridBlock(pack.maps.lobe, x0, y0, w, h);
+  maps.fit_error = GridBlock(pack.maps.fit_error, x0, y0, w, h);
+  maps.status = GridBlock(pack.maps.status, x0, y0, w, h);
+  maps.model = GridBlock(pack.maps.model, x0, y0, w, h);
 }
 
 template <class T>
@@ -114,8 +133,19 @@ Imf::FrameBuffer Interleaved(Imf::PixelType type, T* data, const std::vector<std
   return fb;
 }
 
-// The pyramid, level by level: each level writes the tiles of the band it is given and keeps up
-// to two bands of its rows, the pair its next level is filtered from.
+// Columns [x0, x0 + w) of a pack's grids, with its scalars.
+Pack PackColumns(const Pack& pack, int x0, int w) {
+  Pack out;
+  CopyPackBlock(pack, x0, 0, w, pack.height(), out.field, out.normals, out.maps);
+  out.delta0_mm = pack.delta0_mm;
+  out.max_height_mm = pack.max_height_mm;
+  out.cell_px = pack.cell_px;
+  out.canvas_from_scan = pack.canvas_from_scan;
+  return out;
+}
+
+// The pyramid, level by level: each level writes the tiles of the band it is given, filters it
+// into rows of the next level at once, and gathers those until they make a band (Feed).
 class PyramidWriter {
  public:
   PyramidWriter(Imf::MultiPartOutputFile& file, const PackHeader& header,
@@ -135,20 +165,32 @@ class PyramidWriter {
     digests_.assign(static_cast<size_t>(row + 1) * 5, 0);  // + the boxes part's
   }
 
-  // Rows [rows_in_[level], + band height) of `level`.
-  Status Feed(int level, const PackLevel& band) {
+  // Rows [rows_in_[level], + band height) of `level`: its tiles are written, and the band is
+  // filtered at once into rows of the next level, which gathers them until it has a row of
+  // tiles. A band starts on an even row (a whole number of tiles down), so filtering it alone
+  // gives the rows filtering the whole level would (the filter is 2 x 2, texel by texel). So a
+  // level holds one band of its own and less than a row of tiles of the next: the merge's memory
+  // is about two bands of level 0. The band is taken, not copied.
+  Status Feed(int level, PackLevel band) {
     const int y0 = rows_in_[level], rows = band.field.height();
     if (Status s = WriteTiles(level, y0, band); !s.ok()) return s;
     rows_in_[level] += rows;
     if (level + 1 == static_cast<int>(sizes_.size())) return Status::Ok();
-    PackLevel& pending = pending_[level];
-    ForEachGrid(pending, band, [](auto& to, const auto& from) { AppendRows(to, from); });
-    pending.field.pitch_mm = band.field.pitch_mm;
-    const bool level_done = rows_in_[level] == sizes_[level][1];
-    if (pending.field.height() < 2 * options_.tile_size && !level_done) return Status::Ok();
-    const PackLevel coarse = PrefilterLevel(pending);
+    PackLevel coarse = PrefilterLevel(band);
+    band = PackLevel{};
+    PackLevel& pending = pending_[level + 1];
+    if (pending.field.height() == 0) {
+      pending = std::move(coarse);
+    } else {
+      ForEachGrid(pending, coarse, [](auto& to, const auto& from) { AppendRows(to, from); });
+      coarse = PackLevel{};
+    }
+    const int next_rows = rows_in_[level + 1] + pending.field.height();
+    if (pending.field.height() < options_.tile_size && next_rows < sizes_[level + 1][1])
+      return Status::Ok();
+    PackLevel next = std::move(pending);
     pending = PackLevel{};
-    return Feed(level + 1, coarse);
+    return Feed(level + 1, std::move(next));
   }
 
   int64_t texels_done(int level) const { return rows_in_[level]; }
@@ -158,12 +200,21 @@ class PyramidWriter {
  private:
   int TilesX(int w) const { return (w + options_.tile_size - 1) / options_.tile_size; }
 
-  Status WriteTiles(int level, int y0, const PackLevel& band) {
-    const int t = options_.tile_size, w = band.field.width(), rows = band.field.height();
+  // The band's grids are lent to a Pack (validated as one) and given back.
+  Status WriteTiles(int level, int y0, PackLevel& band) {
     Pack pack;
-    pack.field = band.field;
-    pack.normals = band.normals;
-    pack.maps = band.maps;
+    pack.field = std::move(band.field);
+    pack.normals = std::move(band.normals);
+    pack.maps = std::move(band.maps);
+    Status s = WritePackTiles(level, y0, pack);
+    band.field = std::move(pack.field);
+    band.normals = std::move(pack.normals);
+    band.maps = std::move(pack.maps);
+    return s;
+  }
+
+  Status WritePackTiles(int level, int y0, Pack& pack) {
+    const int t = options_.tile_size, w = pack.field.width(), rows = pack.field.height();
     pack.delta0_mm = header_.delta0_mm;
     pack.max_height_mm = header_.max_height_mm;
     pack.cell_px = header_.cell_px;
@@ -174,18 +225,19 @@ class PyramidWriter {
     if (Status s = CheckHalfRange(pack, y0); !s.ok())
       return Error{Rows(level, y0, rows) + ": " + s.message()};
     if (level == 0)
-      for (const ReflectanceModel m : band.maps.model.data) ++models_[static_cast<size_t>(m)];
-    const Pack enc = EncodePackValues(pack, options_);
+      for (const ReflectanceModel m : pack.maps.model.data) ++models_[static_cast<size_t>(m)];
     const int ty = y0 / t;
     std::vector<uint16_t> surface, reflectance;
     for (int tx = 0; tx * t < w; ++tx) {
       const int x0 = tx * t, tw = std::min(t, w - x0);
+      // Encoded a tile at a time (the encoding is per texel), not the whole band at once.
+      const Pack enc = EncodePackValues(PackColumns(pack, x0, tw), options_);
       surface.assign(static_cast<size_t>(tw) * rows * 4, 0);
       reflectance.assign(static_cast<size_t>(tw) * rows * 9, 0);
       for (int y = 0; y < rows; ++y)
         for (int x = 0; x < tw; ++x) {
           const size_t o = static_cast<size_t>(y) * tw + x;
-          EncodeTexel(enc.field, enc.normals, enc.maps, enc.field.height_mm.Index(x0 + x, y),
+          EncodeTexel(enc.field, enc.normals, enc.maps, enc.field.height_mm.Index(x, y),
                       &surface[4 * o], &reflectance[9 * o]);
         }
       OIIO::SHA1 sha;
@@ -220,17 +272,8 @@ class PyramidWriter {
 PackLevel PackRows(const Pack& pack, int y0, int rows) {
   DIGITIZE_CHECK(y0 >= 0 && rows >= 0 && y0 + rows <= pack.height(), "PackRows: rows outside");
   PackLevel band;
-  band.field.pitch_mm = pack.field.pitch_mm;
-  band.field.height_mm = GridRows(pack.field.height_mm, y0, rows);
-  band.field.state = GridRows(pack.field.state, y0, rows);
+  CopyPackBlock(pack, 0, y0, pack.width(), rows, band.field, band.normals, band.maps);
   band.max_height_mm = band.field.height_mm;
-  band.normals = GridRows(pack.normals, y0, rows);
-  band.maps.rho_d = GridRows(pack.maps.rho_d, y0, rows);
-  band.maps.rho_s = GridRows(pack.maps.rho_s, y0, rows);
-  band.maps.lobe = GridRows(pack.maps.lobe, y0, rows);
-  band.maps.fit_error = GridRows(pack.maps.fit_error, y0, rows);
-  band.maps.status = GridRows(pack.maps.status, y0, rows);
-  band.maps.model = GridRows(pack.maps.model, y0, rows);
   return band;
 }
 
@@ -288,7 +331,8 @@ Status WriteTiledPack(const fs::path& path, const PackHeader& header,
         if (b->max_height_mm.size() != b->field.height_mm.size())
           b->max_height_mm = b->field.height_mm;
         b->field.pitch_mm = header.pitch_mm;
-        if (Status s = pyramid.Feed(0, *b); !s.ok()) return Error{file + ": " + s.message()};
+        if (Status s = pyramid.Feed(0, std::move(*b)); !s.ok())
+          return Error{file + ": " + s.message()};
       }
       if (pyramid.models() != header.texels_by_model)
         return Error{file + ": the texels are " + ModelCountsText(pyramid.models()) +

@@ -299,7 +299,8 @@ Status LoadPhoto(Photo& photo, const PhotoSetOptions& options) {
 }
 
 Result<Photo> LoadPhotoRegion(const Photo& photo, const PixelRect& region,
-                              ImageRegionReader& reader, const PhotoSetOptions& options) {
+                              ImageRegionReader& reader, const PhotoSetOptions& options,
+                              const std::filesystem::path& tiled_copy) {
   if (Status s = options.Validate(); !s) return Error{s.message()};
   const Camera& c = photo.camera;
   if (region.width <= 0 || region.height <= 0 || region.x < 0 || region.y < 0 ||
@@ -307,7 +308,8 @@ Result<Photo> LoadPhotoRegion(const Photo& photo, const PixelRect& region,
     return Error{photo.entry + ": region (" + std::to_string(region.x) + ", " +
                  std::to_string(region.y) + ", " + Size(region.width, region.height) +
                  ") is not inside the " + Size(c.width, c.height) + " image"};
-  auto image = reader.Read(photo.path, region.x, region.y, region.width, region.height);
+  auto image = reader.Read(tiled_copy.empty() ? photo.path : tiled_copy, region.x, region.y,
+                           region.width, region.height);
   if (!image) return Error{photo.entry + ": " + image.error().message};
   Photo part;
   part.path = photo.path;

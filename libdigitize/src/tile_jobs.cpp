@@ -1,5 +1,6 @@
 #include "digitize/tile_jobs.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
@@ -242,6 +243,7 @@ struct TileInputs {
   PhotoSet photos;            // parts of the photos that see the tile
   TexelRect region;           // the tile, in the window's texels
   int halo = 0;               // texels
+  size_t from_copies = 0;     // photo parts read from tiled copies (photo_tile_cache.h)
 };
 
 constexpr int kHaloSlackTexels = 2;  // bilinear quads and the tracer's whole-texel footprints
@@ -347,6 +349,7 @@ Result<int> LargestTileHalo(const TilePlan& plan) {
 namespace {
 
 Result<TileInputs> ReadTileInputs(const TilePlan& plan, size_t index, const PhotoSet& whole,
+                                  const std::vector<fs::path>& copies,
                                   const RigidTransform& canvas_from_scan, double pitch,
                                   ImageRegionReader& reader) {
   const TexelRect& tile = plan.tiles[index];
@@ -364,11 +367,13 @@ Result<TileInputs> ReadTileInputs(const TilePlan& plan, size_t index, const Phot
   in.photos.source = whole.source;
   const auto box =
       TileBox(plan, tile, pitch, plan.min_height_mm - pitch, plan.max_height_mm + pitch);
-  for (const Photo& photo : whole.photos) {
+  for (size_t i = 0; i < whole.photos.size(); ++i) {
+    const Photo& photo = whole.photos[i];
     const PixelRect rect = BoxPixels(photo.camera, canvas_from_scan, box, pitch);
     if (rect.width == 0) continue;  // sees none of the tile
-    auto part = LoadPhotoRegion(photo, rect, reader, plan.photo);
+    auto part = LoadPhotoRegion(photo, rect, reader, plan.photo, copies[i]);
     if (!part.ok()) return part.error();
+    in.from_copies += !copies[i].empty();
     in.photos.photos.push_back(std::move(part).value());
   }
   if (in.photos.photos.empty()) {
@@ -382,6 +387,19 @@ Result<TileInputs> ReadTileInputs(const TilePlan& plan, size_t index, const Phot
 }
 
 }  // namespace
+
+Result<PhotoTileCacheSummary> CachePlanPhotos(const TilePlan& plan,
+                                              const ProgressCallback& progress) {
+  if (Status s = UseWorkFolder(plan); !s.ok()) return Error{s.message()};
+  PhotoSetOptions headers_only = plan.photo;
+  headers_only.load_pixels = false;
+  auto photos = ReadPhotoSetFile(plan.photos, headers_only);
+  if (!photos.ok()) return photos.error();
+  if (photos->is_rti) return PhotoTileCacheSummary{};  // fitted untiled, never by tile jobs
+  auto summary = WritePhotoTileCache(*photos, plan.PhotoCacheFolder(), progress);
+  if (summary.ok()) AppendLog(plan, "photo cache: " + summary->Brief());
+  return summary;
+}
 
 Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& options,
                                const ProgressCallback& progress) {
@@ -423,6 +441,10 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
                  std::to_string(header->height) + " texels, the plan " + plan.file.string() +
                  " was cut for " + std::to_string(plan.canvas_width) + " x " +
                  std::to_string(plan.canvas_height) + ": make a new plan"};
+  std::string cache_note;
+  const std::vector<fs::path> copies =
+      FindPhotoTileCopies(*photos, plan.PhotoCacheFolder(), &cache_note);
+  if (!cache_note.empty()) AppendLog(plan, "photo cache: " + cache_note);
   ImageRegionReader reader(options.cache_mb);
   // One texel of the canvas: its frame and pitch, which every tile's window shares.
   auto frame = ReadPreprocessWindow(plan.canvas, 0, 0, 1, 1, reader);
@@ -435,8 +457,8 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
   for (size_t k = 0; k < todo.size(); ++k) {
     const size_t index = todo[k];
     const auto tile_start = Clock::now();
-    auto in = ReadTileInputs(plan, index, *photos, frame->canvas_from_scan, frame->field.pitch_mm,
-                             reader);
+    auto in = ReadTileInputs(plan, index, *photos, copies, frame->canvas_from_scan,
+                             frame->field.pitch_mm, reader);
     if (!in.ok()) return Error{"tile " + std::to_string(index) + ": " + in.error().message};
     const Status fitted = FitReflectanceRegions(
         in->canvas.field, in->canvas.normals, in->canvas.canvas_from_scan, in->photos, fit,
@@ -454,10 +476,10 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
           report.fitted.push_back(index);
           AppendLog(plan,
                     Format("tile %zu of %zu fitted in %.1f s (window %d x %d, halo %d, %zu of %zu "
-                           "photos): ",
+                           "photos, %zu read from tiled copies): ",
                            index, plan.tiles.size(), Since(tile_start), in->canvas.field.width(),
                            in->canvas.field.height(), in->halo, in->photos.photos.size(),
-                           photos->photos.size()) +
+                           photos->photos.size(), in->from_copies) +
                         result.report.Brief());
           return Status::Ok();
         },
@@ -474,9 +496,13 @@ Result<TileRunReport> RunTiles(const TilePlan& plan, const TileRunOptions& optio
 
 namespace {
 
-// The merge reads the canvas by rows of the whole width; a bounded cache keeps its memory
-// independent of the canvas's height.
-constexpr size_t kMergeCacheMb = 512;
+// The merge reads the canvas a band of rows of the whole width at a time: its cache holds a few
+// bands of height, normals and mask (17 bytes a texel), not more (a cache fills to its bound:
+// 512 MB was a third of the merge's peak at 8192 wide).
+size_t MergeCacheMb(int width, int band_rows) {
+  const size_t band = static_cast<size_t>(width) * static_cast<size_t>(band_rows) * 17;
+  return std::max<size_t>(64, (3 * band) >> 20);
+}
 
 // Tile `index`'s maps, checked against the plan's rectangle.
 Result<ReflectanceMaps> ReadTileMaps(const TilePlan& plan, size_t index) {
@@ -512,7 +538,7 @@ Result<PackSummary> StreamTilesToPack(const TilePlan& plan,
   if (Status s = plan.pack.Validate(); !s.ok()) return Error{file + ": " + s.message()};
   if (Status s = CheckOutputPath(plan.out, {plan.canvas, plan.work}); !s.ok())
     return Error{s.message()};
-  ImageRegionReader reader(kMergeCacheMb);
+  ImageRegionReader reader(MergeCacheMb(plan.canvas_width, plan.pack.tile_size));
   auto frame = ReadPreprocessWindow(plan.canvas, 0, 0, 1, 1, reader);
   if (!frame.ok()) return frame.error();
   PackHeader header;
@@ -561,7 +587,12 @@ Result<PackSummary> StreamTilesToPack(const TilePlan& plan,
       if (t.y + t.height <= y0 + rows) open.erase(it);
     }
     ReportProgress(progress, "merge", 0.3 + 0.7 * static_cast<double>(y0 + rows) / h);
-    return BaseLevel(canvas->field, canvas->normals, maps);
+    PackLevel level;  // taken, not copied (BaseLevel copies): a band is the canvas's width
+    level.max_height_mm = canvas->field.height_mm;
+    level.field = std::move(canvas->field);
+    level.normals = std::move(canvas->normals);
+    level.maps = std::move(maps);
+    return level;
   };
   if (Status s = WriteTiledPack(plan.out, header, plan.pack, band); !s.ok())
     return Error{s.message()};

@@ -42,6 +42,7 @@ void AddPlan(CLI::App* tiles, int& exit_code) {
     TilePlanOptions plan;
     std::string method = "fast";
     bool quantised = false;
+    bool no_photo_cache = false;
   };
   auto args = std::make_shared<Args>();
   CLI::App* c = tiles->add_subcommand(
@@ -70,6 +71,10 @@ void AddPlan(CLI::App* tiles, int& exit_code) {
       ->check(CLI::IsMember({"fast", "ceres"}))
       ->capture_default_str()
       ->group("Fit");
+  c->add_flag("--no-photo-cache", args->no_photo_cache,
+              "Do not copy PNG / JPEG photos into tiled TIFFs in the work folder (the jobs then "
+              "decode every row above the part of a photo they read; the copies take ~5x the "
+              "JPEGs' disk space)");
   AddFitFlags(c, args->plan.fit, args->plan.photo);
   AddPhotoSetFlags(c, args->plan.photo);
   AddPackWriteFlags(c, args->plan.pack, args->quantised);
@@ -103,6 +108,19 @@ void AddPlan(CLI::App* tiles, int& exit_code) {
             "tile; the fit's time per texel then stays flat (docs/cluster.md)\n",
             std::min(suggest, kMaxTileSize));
       }
+    }
+    if (!args->no_photo_cache) {
+      // Once here, not in the jobs: array tasks would race to make the same copies.
+      ProgressBar bar("photo tile cache");
+      auto cache = CachePlanPhotos(*plan, bar.Callback());
+      bar.Finish();
+      // The copies only save time: without them the jobs read the photos themselves.
+      if (!cache.ok())
+        Warn("tiles plan", "photo cache not made (" + EscapeForTerminal(cache.error().message) +
+                               "); the tile jobs will read the photos themselves");
+      else
+        std::printf("photo cache: %s -> %s\n", cache->Brief().c_str(),
+                    EscapeForTerminal(plan->PhotoCacheFolder().string()).c_str());
     }
     std::printf("next: digitize tiles run %s --all   (or: digitize tiles sbatch %s)\n",
                 EscapeForTerminal(plan->file.string()).c_str(),

@@ -93,6 +93,8 @@ struct ImageHeader {
   int width = 0, height = 0, channels = 0;
   bool integer_samples = false;  // 8/16-bit integers (not float or half)
   std::string format;            // "openexr", "png", ...
+  int bits_per_sample = 0;       // 8, 16, 32 (integer formats: the depth stored, e.g. 4 or 12)
+  bool tiled = false;            // stored in tiles (TIFF, OpenEXR), so a region reads alone
   // Physical pixel size from the resolution tags (XResolution + ResolutionUnit: TIFF, EXIF,
   // JFIF, PNG pHYs), e.g. 300 per inch -> 25.4 / 300 mm. 0 when there is none, or no unit
   // (an aspect ratio only); resolution_tag says what was read ("300 per inch").
@@ -100,6 +102,14 @@ struct ImageHeader {
   std::string resolution_tag;
 };
 Result<ImageHeader> ReadImageHeader(const std::filesystem::path& path);
+
+// A tiled TIFF of an image file's samples exactly as stored: 1 or 3 channels of 8 or 16 bits
+// (the types PNG and JPEG decode to), `tile` pixels a side, zip level 1. For files that cannot be
+// read from the middle (a PNG or JPEG region costs decoding every row above it), so that a region
+// of the copy costs its own tiles. Read and written a row of tiles at a time, written atomically;
+// errors name the file (other channel counts or depths are refused).
+Status WriteTiledCopy(const std::filesystem::path& from, const std::filesystem::path& to,
+                      int tile = 256);
 
 // Rectangles of image files, read through one OpenImageIO ImageCache whose memory is bounded
 // (`max_cache_mb`): tiled TIFF/OpenEXR files are read tile by tile, scanline files (PNG, JPEG)

@@ -345,9 +345,12 @@ struct PixelRect {
 // pixel's ray is the whole photo's ray through the same pixel, bit for bit), its pixels read
 // through `reader` (a bounded cache: photos far larger than memory are read a part at a time)
 // and converted as LoadPhoto converts them. Errors name the entry and the file; a region not
-// inside the image.
+// inside the image. `tiled_copy`, when given, is read instead of the photo's file: a tiled copy
+// of its samples (WriteTiledCopy, photo_tile_cache.h); the photo is still the photo (its file's
+// name says whether it is lossy).
 Result<Photo> LoadPhotoRegion(const Photo& photo, const PixelRect& region,
-                              ImageRegionReader& reader, const PhotoSetOptions& options = {});
+                              ImageRegionReader& reader, const PhotoSetOptions& options = {},
+                              const std::filesystem::path& tiled_copy = {});
 
 // sRGB EOTF (IEC 61966-2-1), exact piecewise form: c <= 0.04045 ? c / 12.92
 // : ((c + 0.055) / 1.055)^2.4; odd-symmetric for negative values (extended sRGB).

@@ -11,6 +11,8 @@
 //                       written atomically (WriteDirectoryAtomically), so a tile is either there
 //                       whole or not at all, whenever the job is killed
 //   fit/                the merged fit folder (report.json alone when the pack is tiled)
+//   photo_cache/        tiled copies of the PNG / JPEG photos (CachePlanPhotos), which the
+//                       tile jobs read instead while they are current (photo_tile_cache.h)
 //   run.log             one line per tile fitted, and per merge
 //   slurm/              tiles.sbatch, merge.sbatch, submit.sh (WriteSlurmScripts)
 //   logs/               the Slurm jobs' output (tile_<index>.log, merge.log)
@@ -25,6 +27,7 @@
 
 #include "digitize/core.h"
 #include "digitize/pack.h"
+#include "digitize/photo_tile_cache.h"
 #include "digitize/tile_plan.h"
 
 namespace digitize {
@@ -38,6 +41,12 @@ struct TilesStatus {
   std::string Brief() const;          // "12 of 16 tiles done; pending: 3, 7, 8, 15"
 };
 Result<TilesStatus> StatusOfTiles(const TilePlan& plan);
+
+// Makes the tiled copies of the plan's PNG and JPEG photos the tile jobs read (the work
+// folder's photo_cache/; `tiles plan` runs it): once per plan, before its jobs, so no two jobs
+// race to make them. Copies already there and current are kept.
+Result<PhotoTileCacheSummary> CachePlanPhotos(const TilePlan& plan,
+                                              const ProgressCallback& progress = nullptr);
 
 struct TileRunOptions {
   std::vector<size_t> indices;  // tiles to fit; empty: every tile not done

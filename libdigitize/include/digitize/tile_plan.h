@@ -52,6 +52,8 @@ struct TilePlan {
 
   std::filesystem::path TileFolder(size_t index) const;  // work / "tile_00012"
   std::filesystem::path FitFolder() const { return work / "fit"; }
+  // Tiled copies of the PNG / JPEG photos (photo_tile_cache.h), made by CachePlanPhotos.
+  std::filesystem::path PhotoCacheFolder() const { return work / "photo_cache"; }
 };
 
 // The tiles of a width x height canvas cut into tile_size squares, row by row.
