@@ -54,6 +54,11 @@ configure() {  # configure DIR [cmake args...]: each folder always gets the same
     # The tests' precompiled header (tests/CMakeLists.txt): ccache caches files built with it
     # only when told to ignore the header's timestamps and defines it cannot see.
     export CCACHE_SLOPPINESS=pch_defines,time_macros,include_file_mtime,include_file_ctime
+    # Without this, ccache puts the working directory into the hash of every compile that makes
+    # debug info (the ASan and fuzz builds' -g1), so a clone elsewhere missed on all of them and
+    # rebuilt both cold: most of a CI run. The cost: a hit's debug info may name the other
+    # clone's build folder (file names in it are relative, through CCACHE_BASEDIR).
+    export CCACHE_NOHASHDIR=1
     launcher=(-DCMAKE_C_COMPILER_LAUNCHER=ccache -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
   fi
   cmake -S "$root" -B "$dir" -G Ninja -DDIGITIZE_BUILD_TESTS=ON "${launcher[@]}" "$@" > "$dir.configure.log" 2>&1 ||
