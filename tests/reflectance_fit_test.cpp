@@ -7,12 +7,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "digitize/image_io.h"
 #include "digitize/reflectance_samples.h"
 #include "digitize/relight.h"
 #include "digitize/tangent_frame.h"
@@ -196,8 +198,9 @@ TEST(ReflectanceSamples, PixelMapsSeeWhatTheRaysSee) {
       for (size_t k = 0; k < texels.size(); ++k) {
         const int x = static_cast<int>(texels[k] % w);
         for (const BrdfSample& s : samples.Texel(k)) {
-          if (with_maps && pixels_of_column[x])
+          if (with_maps && pixels_of_column[x]) {
             EXPECT_FLOAT_EQ(s.radiance.x(), static_cast<float>(x)) << "texel column " << x;
+          }
           blended += s.radiance.x() != static_cast<float>(x);
         }
         const bool dropped = with_maps && min_direct == 0 && !pixels_of_column[x];
@@ -607,6 +610,28 @@ TEST(ReflectanceFit, MapsRoundTripThroughTheOutputFolder) {
   EXPECT_EQ(back->rho_d.data, fit->maps.rho_d.data);  // float EXR: bit-exact
   EXPECT_EQ(back->lobe.data, fit->maps.lobe.data);
   EXPECT_EQ(back->status.data, fit->maps.status.data);
+  // Windows (the tiled merge's reads): each the same texels as the whole, every map.
+  ImageRegionReader reader(64);
+  for (const std::array<int, 4> r : {std::array{0, 0, 7, 5}, {2, 1, 4, 3}, {6, 4, 1, 1}}) {
+    auto part = ReadReflectanceMapsWindow(dir, r[0], r[1], r[2], r[3], reader);
+    ASSERT_TRUE(part.ok()) << part.error().message;
+    ASSERT_EQ(part->width(), r[2]);
+    ASSERT_EQ(part->height(), r[3]);
+    for (int y = 0; y < r[3]; ++y)
+      for (int x = 0; x < r[2]; ++x) {
+        const int wx = r[0] + x, wy = r[1] + y;
+        EXPECT_EQ(part->rho_d(x, y), back->rho_d(wx, wy));
+        EXPECT_EQ(part->rho_s(x, y), back->rho_s(wx, wy));
+        EXPECT_EQ(part->lobe(x, y), back->lobe(wx, wy));
+        EXPECT_EQ(part->fit_error(x, y), back->fit_error(wx, wy));
+        EXPECT_EQ(part->status(x, y), back->status(wx, wy));
+        EXPECT_EQ(part->model(x, y), back->model(wx, wy));
+      }
+  }
+  auto outside = ReadReflectanceMapsWindow(dir, 4, 2, 4, 3, reader);  // one column past the edge
+  ASSERT_FALSE(outside.ok());
+  EXPECT_NE(outside.error().message.find("rho_d.exr"), std::string::npos)
+      << outside.error().message;
   std::filesystem::remove(dir / "lobe.exr");
   auto missing = ReadReflectanceMaps(dir);
   ASSERT_FALSE(missing.ok());

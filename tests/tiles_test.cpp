@@ -17,6 +17,7 @@
 #include <sstream>
 #include <thread>
 
+#include "digitize/image_io.h"
 #include "digitize/output_dir.h"
 #include "digitize/pack_tiled.h"
 #include "digitize/pipeline.h"
@@ -477,6 +478,14 @@ TEST_F(TilesCli, ATiledPackStreamsTheMergeAndEqualsThePackOfTheWholeFit) {
   CliRun bad = Cli("tiles merge " + PlanFile());
   EXPECT_EQ(bad.exit_code, 1) << bad.text;
   EXPECT_NE(bad.text.find("tile_00011"), std::string::npos) << bad.text;
+  EXPECT_EQ(ReadFileBytes(Pack()), before);
+  // A value no status has, in a tile the merge reads a band at a time: refused by file and value.
+  ASSERT_TRUE(WritePng8(work / "tile_00005/fit_status.png", Grid<uint8_t>(50, 50, 7)).ok());
+  CliRun bad_value = Cli("tiles merge " + PlanFile());
+  EXPECT_EQ(bad_value.exit_code, 1) << bad_value.text;
+  EXPECT_NE(bad_value.text.find("tile_00005/fit_status.png: value 7 is not a fit status"),
+            std::string::npos)
+      << bad_value.text;
   EXPECT_EQ(ReadFileBytes(Pack()), before);
 }
 

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -582,11 +583,14 @@ Status WriteReflectanceOutputs(const std::filesystem::path& dir, const Reflectan
 
 namespace {
 
+// One map file, whole or a window of it.
+using ReadMapFile = std::function<Result<FloatImage>(const std::filesystem::path&)>;
+
 // Reads one map; checks size and channel names (OpenEXR may reorder channels: map by name).
 Result<std::vector<float>> ReadChannels(const std::filesystem::path& path,
                                         const std::vector<std::string>& names, int& width,
-                                        int& height) {
-  auto image = ReadImage(path);
+                                        int& height, const ReadMapFile& read) {
+  auto image = read(path);
   if (!image.ok()) return image.error();
   if (image->channels != static_cast<int>(names.size()))
     return Error{path.string() + ": " + std::to_string(image->channels) + " channels, expected " +
@@ -612,19 +616,18 @@ Result<std::vector<float>> ReadChannels(const std::filesystem::path& path,
   return out;
 }
 
-}  // namespace
-
-Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
+// The maps of a fit folder, each file read by `read` (the whole file or one window of it).
+Result<ReflectanceMaps> ReadMaps(const std::filesystem::path& dir, const ReadMapFile& read) {
   int w = 0, h = 0;
-  auto rho_d = ReadChannels(dir / "rho_d.exr", {"R", "G", "B"}, w, h);
+  auto rho_d = ReadChannels(dir / "rho_d.exr", {"R", "G", "B"}, w, h, read);
   if (!rho_d.ok()) return rho_d.error();
-  auto rho_s = ReadChannels(dir / "rho_s.exr", {"R", "G", "B"}, w, h);
+  auto rho_s = ReadChannels(dir / "rho_s.exr", {"R", "G", "B"}, w, h, read);
   if (!rho_s.ok()) return rho_s.error();
-  auto lobe = ReadChannels(dir / "lobe.exr", {"cx", "cy", "cz", "k"}, w, h);
+  auto lobe = ReadChannels(dir / "lobe.exr", {"cx", "cy", "cz", "k"}, w, h, read);
   if (!lobe.ok()) return lobe.error();
-  auto error = ReadChannels(dir / "fit_error.exr", {"Y"}, w, h);
+  auto error = ReadChannels(dir / "fit_error.exr", {"Y"}, w, h, read);
   if (!error.ok()) return error.error();
-  auto status = ReadImage(dir / "fit_status.png");
+  auto status = read(dir / "fit_status.png");
   if (!status.ok()) return status.error();
   if (status->width != w || status->height != h || status->channels != 1)
     return Error{(dir / "fit_status.png").string() + ": not a 1-channel " + std::to_string(w) +
@@ -643,7 +646,7 @@ Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
   }
   // model.png: absent in outputs written before GGX texels existed (all Lafortune then).
   if (std::filesystem::exists(dir / "model.png")) {
-    auto model = ReadImage(dir / "model.png");
+    auto model = read(dir / "model.png");
     if (!model.ok()) return model.error();
     if (model->width != w || model->height != h || model->channels != 1)
       return Error{(dir / "model.png").string() + ": not a 1-channel " + std::to_string(w) + "x" +
@@ -658,6 +661,20 @@ Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
   }
   if (Status s = m.Validate(); !s.ok()) return Error{dir.string() + ": " + s.message()};
   return m;
+}
+
+}  // namespace
+
+Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir) {
+  return ReadMaps(dir, [](const std::filesystem::path& path) { return ReadImage(path); });
+}
+
+Result<ReflectanceMaps> ReadReflectanceMapsWindow(const std::filesystem::path& dir, int x0, int y0,
+                                                  int width, int height,
+                                                  ImageRegionReader& reader) {
+  return ReadMaps(dir, [&](const std::filesystem::path& path) {
+    return reader.Read(path, x0, y0, width, height);
+  });
 }
 
 }  // namespace digitize

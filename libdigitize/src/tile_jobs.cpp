@@ -4,7 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <ctime>
-#include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 
 #include "digitize/image_io.h"
@@ -498,7 +498,9 @@ namespace {
 
 // The merge reads the canvas a band of rows of the whole width at a time: its cache holds a few
 // bands of height, normals and mask (17 bytes a texel), not more (a cache fills to its bound:
-// 512 MB was a third of the merge's peak at 8192 wide).
+// 512 MB was a third of the merge's peak at 8192 wide). The tiles' maps go through it too, a
+// band of a tile at a time, each piece copied out as soon as it is read: they need no room of
+// their own beyond a strip of a tile.
 size_t MergeCacheMb(int width, int band_rows) {
   const size_t band = static_cast<size_t>(width) * static_cast<size_t>(band_rows) * 17;
   return std::max<size_t>(64, (3 * band) >> 20);
@@ -515,6 +517,36 @@ Result<ReflectanceMaps> ReadTileMaps(const TilePlan& plan, size_t index) {
                  std::to_string(maps->height()) + ", the tile " + std::to_string(t.width) + " x " +
                  std::to_string(t.height)};
   return maps;
+}
+
+// Tile `index`'s texels by model, its maps read a band of rows at a time (every value checked as
+// ReadTileMaps does, every file's size against the plan's rectangle) so that the tile is never
+// held whole: the streamed merge's header needs the counts before its first band.
+Result<std::array<int64_t, kReflectanceModelCount>> CountTileModels(const TilePlan& plan,
+                                                                    size_t index,
+                                                                    ImageRegionReader& reader) {
+  const fs::path dir = plan.TileFolder(index);
+  const TexelRect& t = plan.tiles[index];
+  for (const char* name :
+       {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr", "fit_status.png", "model.png"}) {
+    std::error_code ec;
+    if (std::string(name) == "model.png" && !fs::exists(dir / name, ec)) continue;  // optional
+    auto header = ReadImageHeader(dir / name);
+    if (!header.ok()) return header.error();
+    if (header->width != t.width || header->height != t.height)
+      return Error{(dir / name).string() + ": " + std::to_string(header->width) + " x " +
+                   std::to_string(header->height) + ", the tile " + std::to_string(t.width) +
+                   " x " + std::to_string(t.height)};
+  }
+  std::array<int64_t, kReflectanceModelCount> models{};
+  constexpr int kBandRows = 256;
+  for (int y = 0; y < t.height; y += kBandRows) {
+    auto band =
+        ReadReflectanceMapsWindow(dir, 0, y, t.width, std::min(kBandRows, t.height - y), reader);
+    if (!band.ok()) return band.error();
+    for (const ReflectanceModel m : band->model.data) ++models[static_cast<size_t>(m)];
+  }
+  return models;
 }
 
 // Texel (x, y) of `from` into (tx, ty) of `to`.
@@ -566,25 +598,23 @@ Result<PackSummary> StreamTilesToPack(const TilePlan& plan,
   }
   header.provenance = std::move(provenance).value();
 
-  std::map<size_t, ReflectanceMaps> open;  // the tiles the band crosses
   const int w = plan.canvas_width, h = plan.canvas_height;
   const PackBandSource band = [&](int y0, int rows) -> Result<PackLevel> {
     auto canvas = ReadPreprocessWindow(plan.canvas, 0, y0, w, rows, reader);
     if (!canvas.ok()) return canvas.error();
     ReflectanceMaps maps = ReflectanceMaps::Zeros(w, rows);
+    // Only the band's rows of each tile it crosses (a row of tiles whole was 46 bytes a texel
+    // of the canvas's width times the tiles' height). MergeTiles checked every tile's files
+    // against the plan first (CountTileModels).
     for (size_t i = 0; i < plan.tiles.size(); ++i) {
       const TexelRect& t = plan.tiles[i];
       const int top = std::max(t.y, y0), bottom = std::min(t.y + t.height, y0 + rows);
       if (top >= bottom) continue;
-      auto it = open.find(i);
-      if (it == open.end()) {
-        auto tile = ReadTileMaps(plan, i);
-        if (!tile.ok()) return tile.error();
-        it = open.emplace(i, std::move(tile).value()).first;
-      }
+      auto part = ReadReflectanceMapsWindow(plan.TileFolder(i), 0, top - t.y, t.width, bottom - top,
+                                            reader);
+      if (!part.ok()) return part.error();
       for (int y = top; y < bottom; ++y)
-        for (int x = 0; x < t.width; ++x) CopyTexel(it->second, x, y - t.y, maps, t.x + x, y - y0);
-      if (t.y + t.height <= y0 + rows) open.erase(it);
+        for (int x = 0; x < t.width; ++x) CopyTexel(*part, x, y - top, maps, t.x + x, y - y0);
     }
     ReportProgress(progress, "merge", 0.3 + 0.7 * static_cast<double>(y0 + rows) / h);
     PackLevel level;  // taken, not copied (BaseLevel copies): a band is the canvas's width
@@ -616,10 +646,20 @@ Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback&
   ReflectanceFitResult whole;
   if (!streamed) whole.maps = ReflectanceMaps::Zeros(plan.canvas_width, plan.canvas_height);
   std::array<int64_t, kReflectanceModelCount> models{};
+  auto count_reader = std::make_unique<ImageRegionReader>(64);  // gone before the pack's bands
   ReportProgress(progress, "merge", 0.0);
   for (size_t i = 0; i < plan.tiles.size(); ++i) {
-    auto maps = ReadTileMaps(plan, i);
-    if (!maps.ok()) return maps.error();
+    const TexelRect& t = plan.tiles[i];
+    if (streamed) {
+      auto counts = CountTileModels(plan, i, *count_reader);
+      if (!counts.ok()) return counts.error();
+      for (size_t m = 0; m < models.size(); ++m) models[m] += (*counts)[m];
+    } else {
+      auto maps = ReadTileMaps(plan, i);
+      if (!maps.ok()) return maps.error();
+      for (int y = 0; y < t.height; ++y)
+        for (int x = 0; x < t.width; ++x) CopyTexel(*maps, x, y, whole.maps, t.x + x, t.y + y);
+    }
     auto part = ReadTileReport(plan.TileFolder(i) / "report.json");
     if (!part.ok()) return part.error();
     if (i == 0) {
@@ -629,17 +669,11 @@ Result<TileMergeReport> MergeTiles(const TilePlan& plan, const ProgressCallback&
       whole.report.quantisation = part->quantisation;
     }
     AddTileReport(whole.report, *part);
-    const TexelRect& t = plan.tiles[i];
-    if (streamed) {
-      for (const ReflectanceModel m : maps->model.data) ++models[static_cast<size_t>(m)];
-    } else {
-      for (int y = 0; y < t.height; ++y)
-        for (int x = 0; x < t.width; ++x) CopyTexel(*maps, x, y, whole.maps, t.x + x, t.y + y);
-    }
     ReportProgress(progress, "merge",
                    (streamed ? 0.3 : 0.8) * static_cast<double>(i + 1) /
                        static_cast<double>(plan.tiles.size()));
   }
+  count_reader.reset();
   whole.report.fit.method = plan.fit.fit.method;
   whole.report.fit.seconds = whole.report.seconds_fit;
   const FolderOutput output{"tiles merge", "fit", {plan.canvas, plan.photos}};

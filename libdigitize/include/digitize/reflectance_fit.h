@@ -211,4 +211,11 @@ Status WriteRelitImages(const std::filesystem::path& dir, const PhotoSet& held_o
 // wrong size or channels, a value the maps may not hold.
 Result<ReflectanceMaps> ReadReflectanceMaps(const std::filesystem::path& dir);
 
+// Texels [x0, x0 + width) x [y0, y0 + height) of the maps in `dir`, read through `reader`
+// (image_io.h: a bounded cache), so that a band of maps costs the band, not the files. The same
+// checks of every value as ReadReflectanceMaps; the files' sizes are not compared with each
+// other (ReadReflectanceMaps does), only each found to hold the window.
+Result<ReflectanceMaps> ReadReflectanceMapsWindow(const std::filesystem::path& dir, int x0, int y0,
+                                                  int width, int height, ImageRegionReader& reader);
+
 }  // namespace digitize
