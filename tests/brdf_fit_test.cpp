@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "digitize/lafortune.h"
+#include "test_paths.h"
 
 namespace digitize {
 namespace {

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "digitize/pack.h"
+#include "test_paths.h"
 
 namespace digitize {
 namespace {

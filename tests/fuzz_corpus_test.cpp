@@ -24,6 +24,7 @@
 #include "fuzz/parser_contract.h"
 #include "fuzz/viewer_contract.h"
 #include "pack_forge.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace digitize {

@@ -14,6 +14,8 @@
 #include <random>
 #include <string>
 
+#include "test_paths.h"
+
 namespace digitize {
 namespace {
 

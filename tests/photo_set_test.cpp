@@ -19,6 +19,7 @@
 
 #include "digitize/image_io.h"
 #include "digitize/photo_tile_cache.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.

@@ -26,6 +26,7 @@
 #include "digitize/photo_set.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 // See io_test.cpp: OIIO 2.4's PNG reader leaks an error string on a libpng longjmp.

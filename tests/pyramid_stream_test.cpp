@@ -183,9 +183,12 @@ TEST(PyramidStream, NeedsTheLevelTheScreenSpaceErrorAsksForAndCoversTheViewOnce)
       float lo = z0, hi = z0;
       for (float z : Get().pack.field.height_mm.data) lo = std::min(lo, z), hi = std::max(hi, z);
       for (const TileKey& k : tiles) {
-        if (k.level > 0) EXPECT_LE(texel_px(k, lo, hi), 1.0) << name;
-        if (k.level < int(s->summary().levels.size()) - 1)
+        if (k.level > 0) {
+          EXPECT_LE(texel_px(k, lo, hi), 1.0) << name;
+        }
+        if (k.level < int(s->summary().levels.size()) - 1) {
           EXPECT_GT(texel_px({k.level + 1, k.tx / 2, k.ty / 2}, -20, 20), 1.0) << name;
+        }
       }
     }
   // Close up: level 0, and only the tiles in view (of 48); far: one coarse tile.

@@ -19,6 +19,7 @@
 #include "digitize/image_io.h"
 #include "digitize/photo_set.h"
 #include "digitize/rti_export.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace digitize {

@@ -26,6 +26,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/patch_sim.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace digitize {

@@ -17,6 +17,7 @@
 #include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/scan_sim.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace digitize {

@@ -20,6 +20,7 @@
 #include "digitize_synth/painting.h"
 #include "digitize_synth/truth_pack.h"
 #include "pack_forge.h"
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace digitize {

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <string>
 
+#include "test_paths.h"
 #include "test_support.h"
 
 namespace {
