@@ -527,10 +527,11 @@ Result<std::array<int64_t, kReflectanceModelCount>> CountTileModels(const TilePl
                                                                     ImageRegionReader& reader) {
   const fs::path dir = plan.TileFolder(index);
   const TexelRect& t = plan.tiles[index];
-  for (const char* name :
-       {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr", "fit_status.png", "model.png"}) {
-    std::error_code ec;
-    if (std::string(name) == "model.png" && !fs::exists(dir / name, ec)) continue;  // optional
+  std::vector<std::string> names = {"rho_d.exr", "rho_s.exr", "lobe.exr", "fit_error.exr",
+                                    "fit_status.png"};
+  std::error_code ec;
+  if (fs::exists(dir / "model.png", ec)) names.push_back("model.png");  // optional (before GGX)
+  for (const std::string& name : names) {
     auto header = ReadImageHeader(dir / name);
     if (!header.ok()) return header.error();
     if (header->width != t.width || header->height != t.height)
