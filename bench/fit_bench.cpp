@@ -12,7 +12,9 @@
 // Writes docs/bench_fit.csv (one row per configuration) for bench/plot_fit.gp.
 //
 //   fit_bench [--long-side=1155] [--lights=64] [--pixels-per-texel=1.13] [--crop=128]
-//             [--csv-dir=docs] [--keep=DIR]
+//             [--csv-dir=docs] [--keep=DIR] [--quick=1]
+// --load-only=DIR: only the photo loading of a set kept by --keep (profiling the decoder).
+// --quick=1: the whole fit by today's path only (no CSV), for profiling one change.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -106,6 +108,19 @@ int main(int argc, char** argv) {
   const std::filesystem::path csv_dir = Arg(argc, argv, "csv-dir", "");
   const std::string csv_name = Arg(argc, argv, "csv-name", "bench_fit.csv");
   const std::string keep = Arg(argc, argv, "keep", "");
+  const bool quick = Arg(argc, argv, "quick", "0") != "0";
+  if (const std::string only = Arg(argc, argv, "load-only", ""); !only.empty()) {
+    for (int run = 0; run < 3; ++run) {
+      const auto t = Clock::now();
+      auto set = ReadCalibration(std::filesystem::path(only) / "calib.json");
+      if (!set.ok()) {
+        std::fprintf(stderr, "%s\n", set.error().message.c_str());
+        return 1;
+      }
+      std::printf("load %zu photos: %.2f s\n", set->photos.size(), Since(t));
+    }
+    return 0;
+  }
 
   const bench::Photographed photographed = bench::PhotographPainting(long_side, lights, ppt);
   const synth::Painting& painting = photographed.painting;
@@ -153,6 +168,15 @@ int main(int argc, char** argv) {
   whole.seconds_write = seconds_write;
   whole.seconds_total = seconds_load + fast->report.seconds_total + seconds_write;
   rows.push_back(whole);
+  if (quick) {
+    std::printf(
+        "whole fit: load %.2f s, samples %.2f s, fit %.2f s, write %.2f s, total %.2f s; "
+        "held-out PSNR %.4f dB\n%s\n",
+        whole.seconds_load, whole.seconds_samples, whole.seconds_fit, whole.seconds_write,
+        whole.seconds_total, whole.psnr_db, whole.brief.c_str());
+    if (keep.empty()) std::filesystem::remove_all(dir);
+    return 0;
+  }
   // 1b. The per-photo path (before issue 14 part 5): same photos, same writing cost.
   ReflectanceFitOptions per_photo = options;
   per_photo.samples.share_view_rays = false;

@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "brdf_fit_problem.h"
 #include "digitize/lafortune.h"
 #include "test_paths.h"
 
@@ -186,6 +187,37 @@ struct RecoveryCase {
   double log_k_tolerance;  // |log k_fit - log k_true|
   double rho_s_relative;   // |rho_s_fit / rho_s_true - 1|
 };
+
+// The noise weights of 8- and 16-bit sRGB and linear codes, vectorised (one log and exp per
+// sample, float), against the scalar reference (double pow): the weight scales every residual,
+// so a relative error of 1e-5 moves a fit's parameters far less than the noise does; toe, knee,
+// clamped (< 0, > 1) and mid-range values.
+TEST(BrdfFit, VectorisedQuantisationWeightsMatchTheReference) {
+  using brdf_detail::TexelProblem;
+  std::vector<float> x = {-0.5f, 0.0f, 1e-6f, 0.003f, 0.0031308f, 0.00314f,
+                          0.01f, 0.2f, 0.5f,  0.999f, 1.0f,       1.7f};
+  for (int i = 0; i <= 1000; ++i) x.push_back(std::pow(10.0f, -5.0f + 5.0f * i / 1000.0f));
+  for (const int code_max : {255, 65535})
+    for (const bool srgb : {true, false})
+      for (const double sigma : {0.002, 0.01}) {
+        BrdfFitOptions o;
+        o.photo_code_max = code_max;
+        o.photo_codes_srgb = srgb;
+        o.noise_sigma = sigma;
+        std::vector<float> w(x.size());
+        Eigen::Map<Eigen::ArrayXf> in(x.data(), static_cast<Eigen::Index>(x.size()));
+        Eigen::Map<Eigen::ArrayXf> out(w.data(), static_cast<Eigen::Index>(w.size()));
+        const double s2 = sigma * sigma;
+        TexelProblem::QuantisationRootWeights(in, s2, o, out);
+        double worst = 0;
+        for (size_t i = 0; i < x.size(); ++i) {
+          const double ref = std::sqrt(s2 / (s2 + TexelProblem::QuantisationVariance(x[i], o)));
+          worst = std::max(worst, std::abs(w[i] - ref) / ref);
+        }
+        EXPECT_LT(worst, 1e-5) << "code max " << code_max << (srgb ? " sRGB" : " linear")
+                               << " sigma " << sigma;
+      }
+}
 
 TEST(BrdfFit, RecoversKnownParametersFromADome) {
   // 4 cameras x (64 dome lights + 12 around each mirror direction): every lobe below is seen by

@@ -394,6 +394,42 @@ TEST_F(IoTest, PngWritersRoundTrip) {
   EXPECT_EQ(Listing(), (std::vector<std::string>{"mask.png", "rgb.png"}));
 }
 
+// Photos are decoded as their codes: 8- and 16-bit PNGs give back exactly the codes written
+// (16-bit: values above 255, where reading 8 bits would lose them), the buffer is reused from one
+// image to the next, and a float image comes back as "not codes" (max_code 0) for ReadImage.
+TEST_F(IoTest, IntegerImagesReadBackAsTheirCodes) {
+  const int w = 7, h = 3;
+  std::vector<uint8_t> codes8(static_cast<size_t>(w) * h * 3);
+  std::vector<uint16_t> codes16(codes8.size());
+  for (size_t i = 0; i < codes8.size(); ++i) {
+    codes8[i] = static_cast<uint8_t>((i * 37) % 256);
+    codes16[i] = static_cast<uint16_t>((i * 4099) % 65536);
+  }
+  ASSERT_TRUE(WriteSrgbPng(Path("p8.png"), w, h, 8, codes8.data()).ok());
+  ASSERT_TRUE(WriteSrgbPng(Path("p16.png"), w, h, 16, codes16.data()).ok());
+  CodeImage image;
+  ASSERT_TRUE(ReadImageCodes(Path("p16.png"), size_t{1} << 20, image).ok());
+  EXPECT_EQ(image.max_code, 65535);
+  EXPECT_EQ(image.width, w);
+  EXPECT_EQ(image.channels, 3);
+  EXPECT_EQ(image.codes16, codes16);
+  ASSERT_TRUE(ReadImageCodes(Path("p8.png"), size_t{1} << 20, image).ok());
+  EXPECT_EQ(image.max_code, 255);
+  EXPECT_EQ(image.height, h);
+  EXPECT_EQ(image.codes8, codes8);
+
+  Grid<float> depth(4, 2, 0.5f);
+  ASSERT_TRUE(WriteFloatExr(Path("depth.exr"), depth, "Y").ok());
+  ASSERT_TRUE(ReadImageCodes(Path("depth.exr"), size_t{1} << 20, image).ok());
+  EXPECT_EQ(image.max_code, 0);
+  EXPECT_EQ(image.width, 0);
+  // The pixel limit and a missing file are errors that name the file, as for ReadImage.
+  const Status small = ReadImageCodes(Path("p8.png"), 10, image);
+  ASSERT_FALSE(small.ok());
+  EXPECT_NE(small.message().find("p8.png"), std::string::npos);
+  EXPECT_FALSE(ReadImageCodes(Path("missing.png"), size_t{1} << 20, image).ok());
+}
+
 TEST_F(IoTest, WriteTextFileReplacesContent) {
   const fs::path path = Path("report.json");
   ASSERT_TRUE(WriteTextFile(path, "old").ok());

@@ -574,6 +574,42 @@ Result<FloatImage> ReadImage(const fs::path& path, size_t max_pixels) {
   return image;
 }
 
+Status ReadImageCodes(const fs::path& path, size_t max_pixels, CodeImage& image) {
+  const std::string name = path.string();
+  image.width = image.height = image.channels = image.max_code = 0;
+  FloatImage header;
+  auto opened = OpenForPixels(path, max_pixels, &header);
+  if (!opened.ok()) return opened.error();
+  const std::unique_ptr<OIIO::ImageInput> in = std::move(opened).value();
+  const OIIO::TypeDesc format = in->spec().format;
+  const bool eight = format == OIIO::TypeDesc::UINT8, sixteen = format == OIIO::TypeDesc::UINT16;
+  if (!eight && !sixteen) return Status::Ok();
+  const uint64_t samples = static_cast<uint64_t>(header.width) *
+                           static_cast<uint64_t>(header.height) *
+                           static_cast<uint64_t>(header.channels);
+  void* data = nullptr;
+  try {
+    if (eight) {
+      image.codes8.resize(samples);
+      data = image.codes8.data();
+    } else {
+      image.codes16.resize(samples);
+      data = image.codes16.data();
+    }
+  } catch (const std::bad_alloc&) {
+    return Error{name + ": not enough memory for " + std::to_string(samples) + " samples"};
+  }
+  if (!in->read_image(0, 0, 0, header.channels, format, data) || in->has_error()) {
+    return Error{name + ": truncated or corrupt pixel data (" + OneLine(in->geterror()) + ")"};
+  }
+  in->close();
+  image.width = header.width;
+  image.height = header.height;
+  image.channels = header.channels;
+  image.max_code = eight ? 255 : 65535;
+  return Status::Ok();
+}
+
 Status ReadImageInBands(const fs::path& path, size_t max_pixels, int band_rows,
                         const std::function<Status(const FloatImage& band, int y0)>& consume) {
   const std::string name = path.string();

@@ -110,20 +110,23 @@ CONF
 }
 
 local_slurm_stop() {
-  local dir="$1" pidfile
+  local dir="$1" pidfile pid i
+  local pids=()
   [[ -d "$dir" ]] || return 0
+  # Every pid before any kill: a daemon removes its pid file as it exits, so a file read after
+  # the kills can be gone between the test and the read (seen: the test failing in its cleanup).
   for pidfile in "$dir/slurmd.pid" "$dir/slurmctld.pid" "$dir/munge/munged.pid"; do
-    [[ -f "$pidfile" ]] || continue
-    kill "$(cat "$pidfile")" 2> /dev/null || true
+    pid="$(cat "$pidfile" 2> /dev/null)" && [[ -n "$pid" ]] && pids+=("$pid")
   done
-  for pidfile in "$dir/slurmd.pid" "$dir/slurmctld.pid" "$dir/munge/munged.pid"; do
-    [[ -f "$pidfile" ]] || continue
-    local pid i
-    pid="$(cat "$pidfile")"
+  for pid in "${pids[@]}"; do
+    kill "$pid" 2> /dev/null || true
+  done
+  for pid in "${pids[@]}"; do
     for i in $(seq 1 20); do
       kill -0 "$pid" 2> /dev/null || break
       sleep 0.25
     done
     kill -9 "$pid" 2> /dev/null || true
   done
+  return 0
 }

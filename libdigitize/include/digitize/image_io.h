@@ -139,6 +139,20 @@ class ImageRegionReader {
 Result<FloatImage> ReadImage(const std::filesystem::path& path,
                              size_t max_pixels = size_t{1} << 28);
 
+// An 8- or 16-bit integer image's samples as stored (codes 0..max_code, not mapped onto
+// [0, 1]), for callers that look codes up in a table (photos): a quarter (8-bit) or half of the
+// float image's memory and no conversion on the way. max_code is 255 or 65535; an image whose
+// samples are float, half or deeper integers comes back with max_code 0 and no samples (read it
+// with ReadImage). `into` is reused: a caller decoding many images keeps one per thread, so its
+// buffer is not fresh memory (a page fault per 4 KB) for every image. Errors: ReadImage's.
+struct CodeImage {
+  int width = 0, height = 0, channels = 0;
+  int max_code = 0;
+  std::vector<uint8_t> codes8;    // interleaved, max_code 255
+  std::vector<uint16_t> codes16;  // interleaved, max_code 65535
+};
+Status ReadImageCodes(const std::filesystem::path& path, size_t max_pixels, CodeImage& into);
+
 // The image a band of rows at a time, in order: `consume(band, y0)` gets rows [y0, y0 +
 // band.height) as ReadImage would give them (band.width and the header fields are the file's).
 // For readers that convert as they go, so that the float copy of a whole large image (12 bytes
