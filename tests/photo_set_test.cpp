@@ -460,6 +460,24 @@ TEST_F(CalibrationTest, HostileFiles) {
     ASSERT_TRUE(set.ok()) << set.error().message;
     EXPECT_NEAR(set->photos[1].rgb(2, 3).y(), SrgbToLinear(9.0f / 255.0f), 1e-7);
   }
+  {  // RGBA as float (an EXR, linear): the same, through the float path; values exact
+    std::vector<float> rgba(kW * kH * 4);
+    for (size_t i = 0; i < rgba.size(); i += 4) {
+      rgba[i] = 0.25f, rgba[i + 1] = 0.5f, rgba[i + 2] = 0.75f;
+      rgba[i + 3] = 0.0f;
+    }
+    WriteImage("rgba.exr", kW, kH, 4, OIIO::TypeDesc::FLOAT, rgba);
+    doc_["images"][1]["path"] = "rgba.exr";
+    const json declared = doc_["images"][1].value("encoding", json());
+    doc_["images"][1]["encoding"] = "linear";
+    auto set = Read();
+    ASSERT_TRUE(set.ok()) << set.error().message;
+    EXPECT_EQ(set->photos[1].rgb(2, 3), Vec3f(0.25f, 0.5f, 0.75f));
+    if (declared.is_null())
+      doc_["images"][1].erase("encoding");
+    else
+      doc_["images"][1]["encoding"] = declared;
+  }
   doc_["images"][1]["path"] = "b.png";
   {
     doc_["version"] = 2;

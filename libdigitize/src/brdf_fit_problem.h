@@ -203,38 +203,28 @@ class TexelProblem {
     return step * step * (1.0 / 12.0 + c * c);
   }
 
-  // sqrt(w) = sqrt(sigma^2 / (sigma^2 + quantisation variance)) for linear radiances x, as
-  // QuantisationVariance (the reference) but vectorised: its pow per sample and channel, in
-  // double, was ~15 % of the fit (measured). Agrees with it to float rounding.
+  // sqrt(w) = sqrt(sigma^2 / (sigma^2 + QuantisationVariance(x))) for linear radiances x,
+  // vectorised: the reference's pow per sample and channel, in double, was ~15 % of the fit
+  // (measured). On the sRGB curve's power segment 1 / slope grows as lin^(1 - 1/2.4), so the
+  // variance there is its value at 1 times lin^(2 - 2/2.4): one log and one exp per sample.
+  // Agrees with the reference to float rounding.
   static void QuantisationRootWeights(const ArrayMap& x, double sensor2, const BrdfFitOptions& o,
                                       ArrayMap& out) {
-    const double c = o.photo_compression_sigma_codes;
-    // On the sRGB curve's power segment 1 / slope grows as lin^(1 - 1/2.4), so the variance is
-    // its value at the toe times (lin / toe)^(2 - 2/2.4): one exp and one log per sample.
-    const auto var_of_slope = [&](double slope) {
-      const double step = 1.0 / (slope * o.photo_code_max);
-      return step * step * (1.0 / 12.0 + c * c);
-    };
     const float s2 = static_cast<float>(sensor2);
-    if (!o.photo_codes_srgb) {
-      out = s2 / (s2 + static_cast<float>(var_of_slope(1.0)));
-      out = out.sqrt();
+    if (!o.photo_codes_srgb) {  // one code step everywhere
+      out.setConstant(std::sqrt(s2 / (s2 + static_cast<float>(QuantisationVariance(1.0f, o)))));
       return;
     }
     constexpr double kToe = 0.0031308;
-    const float toe_var = static_cast<float>(var_of_slope(12.92));
-    // At lin = toe the power segment's slope is 1.055 / 2.4 toe^(1/2.4 - 1).
-    const float power_var_at_toe =
-        static_cast<float>(var_of_slope(1.055 / 2.4 * std::pow(kToe, 1.0 / 2.4 - 1.0)));
-    const float exponent = static_cast<float>(2.0 - 2.0 / 2.4);
-    const float log_toe = static_cast<float>(std::log(kToe));
     // The largest float <= toe: the curve's slope jumps there (12.92 vs 12.73), so the branch
     // must be the reference's for every float.
     const float toe = static_cast<float>(kToe) > kToe
                           ? std::nextafter(static_cast<float>(kToe), 0.0f)
                           : static_cast<float>(kToe);
-    out = x.max(toe).min(1.0f).log();
-    out = power_var_at_toe * (exponent * (out - log_toe)).exp();
+    const float toe_var = static_cast<float>(QuantisationVariance(0.0f, o));
+    const float var_at_one = static_cast<float>(QuantisationVariance(1.0f, o));
+    const float exponent = static_cast<float>(2.0 - 2.0 / 2.4);
+    out = var_at_one * (exponent * x.max(toe).min(1.0f).log()).exp();
     out = (x <= toe).select(toe_var, out);
     out = (s2 / (s2 + out)).sqrt();
   }

@@ -99,7 +99,8 @@ RowCounts IntegerRow(const T* src, int w, float max_code, int sat_code, const fl
   return n;
 }
 
-// Float samples (EXR, float TIFF): finite check, optional sRGB curve, saturation level.
+// Float samples (EXR, float TIFF): finite check, optional sRGB curve, saturation level. C is the
+// stride, as for IntegerRow (4: alpha dropped).
 template <int C>
 RowCounts FloatRow(const float* src, int w, bool srgb, float sat_level, Vec3f* dst,
                    uint8_t* flags) {
@@ -191,11 +192,14 @@ Converted Convert(const FloatImage& image, ColourEncoding encoding, const PhotoS
                               : o.float_saturation_level;
   return ConvertRows(w, image.height, [&](int y, Vec3f* dst, uint8_t* flags) {
     const float* src = image.pixels.data() + static_cast<size_t>(y) * w * c;
+    const float top = static_cast<float>(max_code);
     if (lut)
-      return c == 1 ? IntegerRow<1>(src, w, float(max_code), sat_code, lut, dst, flags)
-                    : IntegerRow<3>(src, w, float(max_code), sat_code, lut, dst, flags);
-    return c == 1 ? FloatRow<1>(src, w, srgb, sat_level, dst, flags)
-                  : FloatRow<3>(src, w, srgb, sat_level, dst, flags);
+      return c == 1   ? IntegerRow<1>(src, w, top, sat_code, lut, dst, flags)
+             : c == 3 ? IntegerRow<3>(src, w, top, sat_code, lut, dst, flags)
+                      : IntegerRow<4>(src, w, top, sat_code, lut, dst, flags);
+    return c == 1   ? FloatRow<1>(src, w, srgb, sat_level, dst, flags)
+           : c == 3 ? FloatRow<3>(src, w, srgb, sat_level, dst, flags)
+                    : FloatRow<4>(src, w, srgb, sat_level, dst, flags);
   });
 }
 
@@ -329,17 +333,9 @@ Status BadChannels(const Photo& photo, int channels) {
 
 // The decoded pixels of `photo` (the whole image or a rectangle of it) into photo.rgb / flags /
 // counts: RGBA and grey handled, colour linearised, NaN/Inf and saturation flagged.
-Status TakePixels(Photo& photo, FloatImage& image, const PhotoSetOptions& options) {
-  if (image.channels == 4) {
-    // RGBA (a PNG saved with alpha): the colour is what was photographed; alpha is dropped.
-    float* p = image.pixels.data();
-    const size_t n = static_cast<size_t>(image.width) * static_cast<size_t>(image.height);
-    for (size_t i = 0; i < n; ++i)
-      for (int c = 0; c < 3; ++c) p[i * 3 + c] = p[i * 4 + c];
-    image.pixels.resize(n * 3);
-    image.channels = 3;
-  }
-  if (image.channels != 1 && image.channels != 3) return BadChannels(photo, image.channels);
+Status TakePixels(Photo& photo, const FloatImage& image, const PhotoSetOptions& options) {
+  if (image.channels != 1 && image.channels != 3 && image.channels != 4)
+    return BadChannels(photo, image.channels);
   return ConvertInto(photo, image, Resolve(photo.encoding, image.integer_samples), options);
 }
 

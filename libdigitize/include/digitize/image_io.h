@@ -143,8 +143,8 @@ Result<FloatImage> ReadImage(const std::filesystem::path& path,
 // [0, 1]), for callers that look codes up in a table (photos): a quarter (8-bit) or half of the
 // float image's memory and no conversion on the way. max_code is 255 or 65535; an image whose
 // samples are float, half or deeper integers comes back with max_code 0 and no samples (read it
-// with ReadImage). `into` is reused: a caller decoding many images keeps one per thread, so its
-// buffer is not fresh memory (a page fault per 4 KB) for every image. Errors: ReadImage's.
+// with ReadImage). `into`'s buffers are reused: a caller decoding many images keeps a few
+// CodeImages, so each image is not fresh memory (a page fault per 4 KB). Errors: ReadImage's.
 struct CodeImage {
   int width = 0, height = 0, channels = 0;
   int max_code = 0;
