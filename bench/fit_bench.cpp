@@ -12,7 +12,7 @@
 // Writes docs/bench_fit.csv (one row per configuration) for bench/plot_fit.gp.
 //
 //   fit_bench [--long-side=1155] [--lights=64] [--pixels-per-texel=1.13] [--crop=128]
-//             [--csv-dir=docs] [--keep=DIR] [--quick=1]
+//             [--csv-dir=docs] [--keep=DIR (new or empty)] [--quick=1]
 // --load-only=DIR: only the photo loading of a set kept by --keep (profiling the decoder).
 // --quick=1: the whole fit by today's path only (no CSV), for profiling one change.
 #include <chrono>
@@ -122,6 +122,14 @@ int main(int argc, char** argv) {
     return 0;
   }
 
+  // --keep names a user's folder: written into only when new or empty, never cleared (checked
+  // before the render). The default is this bench's own scratch folder, cleared from a last run.
+  if (std::error_code ec;
+      !keep.empty() && std::filesystem::exists(keep, ec) && !std::filesystem::is_empty(keep, ec)) {
+    std::fprintf(stderr, "fit_bench: --keep=%s exists and is not empty; give a new folder\n",
+                 keep.c_str());
+    return 2;
+  }
   const bench::Photographed photographed = bench::PhotographPainting(long_side, lights, ppt);
   const synth::Painting& painting = photographed.painting;
   const synth::SyntheticPhotoSet& truth = photographed.photos;
@@ -137,7 +145,7 @@ int main(int argc, char** argv) {
   const std::filesystem::path dir =
       keep.empty() ? std::filesystem::temp_directory_path() / "digitize_fit_bench"
                    : std::filesystem::path(keep);
-  std::filesystem::remove_all(dir);
+  if (keep.empty()) std::filesystem::remove_all(dir);
   if (Status s = synth::WriteSyntheticPhotoSet(dir, truth); !s.ok()) {
     std::fprintf(stderr, "%s\n", s.message().c_str());
     return 1;
