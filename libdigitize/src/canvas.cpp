@@ -230,14 +230,17 @@ Result<CanvasResult> LocateCanvas(const Grid<Vec3f>& xyz, const CanvasOptions& o
   const LocalFrame frame(plane);
   const double noise_sigma =
       EstimateNoiseSigma(xyz, fitted->fit_mask, fitted->fit_mask_count, frame);
+  // Made again for the outline (a byte per scan sample: not held through the boundary's step).
+  fitted->fit_mask.release();
   RefinedBoundary boundary =
       RefineBoundary(xyz, *region, frame, noise_sigma, fitted->fit_mask_count, options);
   // Each step's masks (a byte per scan sample) go once no later step reads them.
   region->grow.release();
-  const Outline outline = FitOutline(xyz, boundary.mask, region->valid, fitted->fit_mask, frame,
-                                     noise_sigma, std::min(boundary.spacing_x, boundary.spacing_y));
+  JoinMissingSamples(region->filled, region->valid, boundary.mask);
+  const Outline outline =
+      FitOutline(xyz, boundary.mask, region->valid, PlaneFitMask(*region, options), frame,
+                 noise_sigma, std::min(boundary.spacing_x, boundary.spacing_y));
   region->valid.release();
-  fitted->fit_mask.release();
   if (outline.ok) boundary.mask.release();
   const cv::Mat& final_mask = outline.ok ? outline.mask : boundary.mask;
 

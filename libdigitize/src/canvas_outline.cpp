@@ -171,94 +171,141 @@ FirstGuess GuessRectangle(const std::vector<cv::Point2f>& boundary) {
   return out;
 }
 
-// A pixel in the band around the first guess, on its nearest side.
+// A pixel in the band around the first guess, on its nearest side (32 bytes: millions of them
+// on a large scan's band).
 struct Cand {
-  int side;
   float t, o;    // along the side, outwards (first-guess frame)
   float u, v;    // where the pixel's ray meets the plane
   float uo, vo;  // the sample projected on the plane (valid only)
   float height;  // above the plane (valid only)
-  uint8_t in_mask, usable, scan_border;
+  uint8_t side, in_mask, usable, scan_border;
 };
-using SideCandidates = std::array<std::vector<Cand>, 4>;
 
-// Samples in the band (mm either side of the first guess), each on its nearest side.
-SideCandidates GatherSideCandidates(const Grid<Vec3f>& xyz, const cv::Mat& mask,
-                                    const cv::Mat& valid, const LocalFrame& frame,
-                                    const PlaneMap& plane_of, const FirstGuess& guess,
-                                    double band) {
-  const int w = xyz.width, h = xyz.height;
-  const double angle0 = guess.angle0;
-  const std::array<double, 4>& edge0 = guess.edge0;
-  const Eigen::Vector2d& centre = guess.centre;
-  std::array<std::vector<Cand>, 4> side_cands;
-  const Eigen::Vector2d n0[4] = {SideNormal(0, angle0), SideNormal(1, angle0),
-                                 SideNormal(2, angle0), SideNormal(3, angle0)};
-  std::vector<std::array<std::vector<Cand>, 4>> cands_per_row(static_cast<size_t>(h));
-  GatherRows(
-      h,
-      [&](int y, std::array<std::vector<Cand>, 4>& row_out) {
-        const uint8_t* m = mask.ptr<uint8_t>(y);
-        const uint8_t* ok = valid.ptr<uint8_t>(y);
-        for (int x = 0; x < w; ++x) {
-          const Eigen::Vector2d q = plane_of(x, y), d = q - centre;
-          int best = -1;
-          double best_dist = band;
-          for (int s = 0; s < 4; ++s) {
-            const double dist = std::fabs(n0[s].dot(d) - edge0[static_cast<size_t>(s)]);
-            if (dist < best_dist) best = s, best_dist = dist;
-          }
-          if (best < 0) continue;
-          const double o = n0[best].dot(d);
-          // The band's inner half only gives the local canvas height: one sample in four will do.
-          if (o < edge0[static_cast<size_t>(best)] - 0.5 * band && ((x | y) & 1)) continue;
-          Cand c{};
-          c.side = best;
-          c.o = static_cast<float>(o);
-          c.t = static_cast<float>(n0[best < 2 ? 2 : 0].dot(d));
-          c.u = static_cast<float>(q.x()), c.v = static_cast<float>(q.y());
-          c.in_mask = m[x] != 0;
-          c.usable = ok[x] != 0;
-          c.scan_border = x == 0 || y == 0 || x == w - 1 || y == h - 1;
-          if (c.usable) {
-            const Eigen::Vector2f qo = frame.UV(xyz(x, y));
-            c.uo = qo.x(), c.vo = qo.y();
-            c.height = frame.H(xyz(x, y));
-          }
-          row_out[static_cast<size_t>(best)].push_back(c);
-        }
-      },
-      cands_per_row);
-  for (const auto& row : cands_per_row)
-    for (int s = 0; s < 4; ++s)
-      side_cands[static_cast<size_t>(s)].insert(side_cands[static_cast<size_t>(s)].end(),
-                                                row[static_cast<size_t>(s)].begin(),
-                                                row[static_cast<size_t>(s)].end());
-  return side_cands;
-}
+// The samples in the band (mm either side of the first guess), each on its nearest side, handed
+// out a side at a time in row order: one pass over the scan counts each row's candidates per side
+// and where they lie, and a side's are then read from those spans alone. All four sides at once
+// were ~250 MB on a 12288 x 9216 scan (the preprocess's peak, beside the scan).
+class SideBand {
+ public:
+  SideBand(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
+           const LocalFrame& frame, const PlaneMap& plane_of, const FirstGuess& guess, double band)
+      : xyz_(xyz),
+        mask_(mask),
+        valid_(valid),
+        frame_(frame),
+        plane_of_(plane_of),
+        guess_(guess),
+        band_(band),
+        rows_(static_cast<size_t>(xyz.height)) {
+    for (int s = 0; s < 4; ++s) n0_[s] = SideNormal(s, guess.angle0);
+    const int w = xyz.width;
+    tbb::parallel_for(tbb::blocked_range<int>(0, xyz.height, 16),
+                      [&](const tbb::blocked_range<int>& r) {
+                        for (int y = r.begin(); y < r.end(); ++y) {
+                          std::array<Span, 4>& row = rows_[static_cast<size_t>(y)];
+                          for (int x = 0; x < w; ++x) {
+                            const int s = Candidate(x, y, nullptr);
+                            if (s < 0) continue;
+                            Span& span = row[static_cast<size_t>(s)];
+                            span.x0 = std::min(span.x0, x), span.x1 = x;
+                            ++span.count;
+                          }
+                        }
+                      });
+  }
+
+  std::vector<Cand> Gather(int side) const {
+    const size_t h = rows_.size(), s = static_cast<size_t>(side);
+    std::vector<size_t> start(h + 1, 0);
+    for (size_t y = 0; y < h; ++y) start[y + 1] = start[y] + rows_[y][s].count;
+    std::vector<Cand> cands(start[h]);
+    tbb::parallel_for(tbb::blocked_range<int>(0, static_cast<int>(h), 16),
+                      [&](const tbb::blocked_range<int>& r) {
+                        Cand c;
+                        for (int y = r.begin(); y < r.end(); ++y) {
+                          const Span& span = rows_[static_cast<size_t>(y)][s];
+                          size_t next = start[static_cast<size_t>(y)];
+                          for (int x = span.x0; x <= span.x1; ++x)
+                            if (Candidate(x, y, &c) == side) cands[next++] = c;
+                        }
+                      });
+    return cands;
+  }
+
+ private:
+  struct Span {
+    int x0 = std::numeric_limits<int>::max(), x1 = -1;
+    size_t count = 0;
+  };
+
+  // The candidate at (x, y) into *c (its side; -1: none); only the side when c is null.
+  int Candidate(int x, int y, Cand* c) const {
+    const std::array<double, 4>& edge0 = guess_.edge0;
+    const Eigen::Vector2d q = plane_of_(x, y), d = q - guess_.centre;
+    int best = -1;
+    double best_dist = band_;
+    for (int s = 0; s < 4; ++s) {
+      const double dist = std::fabs(n0_[s].dot(d) - edge0[static_cast<size_t>(s)]);
+      if (dist < best_dist) best = s, best_dist = dist;
+    }
+    if (best < 0) return -1;
+    const double o = n0_[best].dot(d);
+    // The band's inner half only gives the local canvas height: one sample in four will do.
+    if (o < edge0[static_cast<size_t>(best)] - 0.5 * band_ && ((x | y) & 1)) return -1;
+    if (!c) return best;
+    const int w = xyz_.width, h = xyz_.height;
+    *c = Cand{};
+    c->side = static_cast<uint8_t>(best);
+    c->o = static_cast<float>(o);
+    c->t = static_cast<float>(n0_[best < 2 ? 2 : 0].dot(d));
+    c->u = static_cast<float>(q.x()), c->v = static_cast<float>(q.y());
+    c->in_mask = mask_.ptr<uint8_t>(y)[x] != 0;
+    c->usable = valid_.ptr<uint8_t>(y)[x] != 0;
+    c->scan_border = x == 0 || y == 0 || x == w - 1 || y == h - 1;
+    if (c->usable) {
+      const Eigen::Vector2f qo = frame_.UV(xyz_(x, y));
+      c->uo = qo.x(), c->vo = qo.y();
+      c->height = frame_.H(xyz_(x, y));
+    }
+    return best;
+  }
+
+  const Grid<Vec3f>& xyz_;
+  const cv::Mat &mask_, &valid_;
+  const LocalFrame& frame_;
+  const PlaneMap& plane_of_;
+  const FirstGuess& guess_;
+  const double band_;
+  Eigen::Vector2d n0_[4];
+  std::vector<std::array<Span, 4>> rows_;
+};
 
 // Per side: the local canvas height (a line along the side, from the band's inner half),
-// canvas-like samples (within `tol` of it), open or closed, and the side's angle.
+// canvas-like samples (within `tol` of it: CanvasLike), open or closed, and the side's angle.
 struct SideFits {
-  std::array<std::vector<uint8_t>, 4> canvas_like;  // per candidate
-  std::array<Eigen::Vector2d, 4> height_line;       // height = [0] + [1] t
-  std::array<double, 4> delta{}, weight{};          // angle against the guess; its weight
-  std::array<double, 4> half_len{};                 // half length of the side
+  std::array<Eigen::Vector2d, 4> height_line;  // height = [0] + [1] t
+  std::array<double, 4> delta{}, weight{};     // angle against the guess; its weight
+  std::array<double, 4> half_len{};            // half length of the side
+  double tol = 0;                              // canvas-like: within this of the height line
 };
 
-SideFits FitSides(const SideCandidates& side_cands, const FirstGuess& guess, double band,
-                  double tol, double spacing, std::array<bool, 4>* closed_out) {
+bool CanvasLike(const Cand& c, const SideFits& fits) {
+  return c.in_mask && c.usable &&
+         c.height <= fits.height_line[c.side].dot(Eigen::Vector2d(1, c.t)) + fits.tol;
+}
+
+// Side s of `fits` from its candidates (and whether it is closed).
+void FitSide(int s, const std::vector<Cand>& cands, const FirstGuess& guess, double band,
+             double spacing, bool* closed_out, SideFits* fits_out) {
   const double(&half0)[2] = guess.half0;
   const std::array<double, 4>& edge0 = guess.edge0;
-  std::array<bool, 4>& closed = *closed_out;
-  SideFits fits;
-  std::array<std::vector<uint8_t>, 4>& canvas_like = fits.canvas_like;
+  SideFits& fits = *fits_out;
+  bool& closed_s = *closed_out;
   std::array<Eigen::Vector2d, 4>& height_line = fits.height_line;
   std::array<double, 4>& delta = fits.delta;
   std::array<double, 4>& weight = fits.weight;
   std::array<double, 4>& half_len = fits.half_len;
-  for (int s = 0; s < 4; ++s) {
-    const auto& cands = side_cands[static_cast<size_t>(s)];
+  {
     const double e = edge0[static_cast<size_t>(s)];
     half_len[static_cast<size_t>(s)] = s < 2 ? half0[1] : half0[0];
     const double corner_cut =
@@ -292,19 +339,13 @@ SideFits FitSides(const SideCandidates& side_cands, const FirstGuess& guess, dou
       inner.swap(kept);
     }
     height_line[static_cast<size_t>(s)] = line;
-    auto& like = canvas_like[static_cast<size_t>(s)];
-    like.resize(cands.size());
-    for (size_t i = 0; i < cands.size(); ++i) {
-      const Cand& c = cands[i];
-      like[i] = c.in_mask && c.usable && c.height <= line.dot(Eigen::Vector2d(1, c.t)) + tol;
-    }
     // Bins of one spacing along the side: the outermost canvas-like sample of each, unless it
     // lies on the scan's border (the canvas goes on beyond the view there).
     const int nbins = std::max(1, static_cast<int>(2 * corner_cut / spacing));
     std::vector<int> bin_best(static_cast<size_t>(nbins), -1);
     for (size_t i = 0; i < cands.size(); ++i) {
       const Cand& c = cands[i];
-      if (!like[i] || std::fabs(c.t) >= corner_cut) continue;
+      if (!CanvasLike(c, fits) || std::fabs(c.t) >= corner_cut) continue;
       const int b = std::clamp(static_cast<int>((c.t + corner_cut) / spacing), 0, nbins - 1);
       int& best = bin_best[static_cast<size_t>(b)];
       if (best < 0 || c.o > cands[static_cast<size_t>(best)].o) best = static_cast<int>(i);
@@ -316,11 +357,10 @@ SideFits FitSides(const SideCandidates& side_cands, const FirstGuess& guess, dou
         pts.emplace_back(-corner_cut + (b + 0.5) * spacing, cands[static_cast<size_t>(best)].o);
     }
     // Open: too little of the side's edge is in view to place it.
-    closed[static_cast<size_t>(s)] =
-        static_cast<int>(pts.size()) >= kOutlineMinBins &&
-        pts.back().x() - pts.front().x() >=
-            kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)];
-    if (!closed[static_cast<size_t>(s)]) continue;
+    closed_s = static_cast<int>(pts.size()) >= kOutlineMinBins &&
+               pts.back().x() - pts.front().x() >=
+                   kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)];
+    if (!closed_s) return;
     double beta = 0;
     bool fitted = false;
     for (int pass = 0; pass < 4 && pts.size() >= 3; ++pass) {
@@ -346,29 +386,25 @@ SideFits FitSides(const SideCandidates& side_cands, const FirstGuess& guess, dou
       if (kept.size() == pts.size()) break;
       pts.swap(kept);
     }
-    if (!fitted || static_cast<int>(pts.size()) < kOutlineMinBins) continue;
+    if (!fitted || static_cast<int>(pts.size()) < kOutlineMinBins) return;
     const double span = pts.back().x() - pts.front().x();
-    if (span < kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)]) continue;
+    if (span < kOutlineMinSpanShare * 2 * half_len[static_cast<size_t>(s)]) return;
     static constexpr double kSign[4] = {-1, 1, 1, -1};
     delta[static_cast<size_t>(s)] = std::atan(kSign[s] * beta);
     weight[static_cast<size_t>(s)] = static_cast<double>(pts.size()) * span * span;
   }
-  return fits;
 }
 
 // Side positions in the refined frame: the threshold that best separates canvas-like samples
 // (inside) from the others (outside); open sides reach the mask's extent. Frame samples lying
 // over the visible canvas mark the side as overhung.
-void PlaceSides(const SideCandidates& side_cands, const SideFits& fits, const FirstGuess& guess,
-                double spacing, Outline* out_ptr) {
+void PlaceSide(int s, const std::vector<Cand>& cands, const SideFits& fits, const FirstGuess& guess,
+               double spacing, Outline* out_ptr) {
   Outline& out = *out_ptr;
-  const std::array<std::vector<uint8_t>, 4>& canvas_like = fits.canvas_like;
   const std::array<Eigen::Vector2d, 4>& height_line = fits.height_line;
   const std::array<double, 4>& half_len = fits.half_len;
   const std::array<double, 4>& edge0 = guess.edge0;
-  for (int s = 0; s < 4; ++s) {
-    const auto& cands = side_cands[static_cast<size_t>(s)];
-    const auto& like = canvas_like[static_cast<size_t>(s)];
+  {
     const Eigen::Vector2d n = SideNormal(s, out.angle);
     const double corner_cut =
         half_len[static_cast<size_t>(s)] -
@@ -380,14 +416,14 @@ void PlaceSides(const SideCandidates& side_cands, const SideFits& fits, const Fi
       const double o = n.dot(Eigen::Vector2d(c.u, c.v) - out.centre);
       if (c.in_mask) mask_extent = std::max(mask_extent, o);
       if (!c.usable || std::fabs(c.t) >= corner_cut) continue;
-      samples.emplace_back(static_cast<float>(o), like[i] ? 1 : -1);
+      samples.emplace_back(static_cast<float>(o), CanvasLike(c, fits) ? 1 : -1);
     }
     if (!out.closed[static_cast<size_t>(s)] || samples.empty()) {
       out.closed[static_cast<size_t>(s)] = false;
       out.edge[static_cast<size_t>(s)] = mask_extent > -std::numeric_limits<double>::max()
                                              ? mask_extent + spacing
                                              : edge0[static_cast<size_t>(s)];
-      continue;
+      return;
     }
     std::sort(samples.begin(), samples.end());
     long cost = 0;
@@ -479,10 +515,10 @@ Eigen::Vector2d SideNormal(int s, double angle) {
 }
 
 Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
-                   const cv::Mat& fit_mask, const LocalFrame& frame, double noise_sigma,
-                   double spacing) {
+                   cv::Mat fit_mask, const LocalFrame& frame, double noise_sigma, double spacing) {
   Outline out;
   const std::optional<PlaneMap> plane_of = FitPlaneMap(xyz, fit_mask, frame, &out.note);
+  fit_mask.release();
   if (!plane_of) return out;
   const std::vector<cv::Point2f> boundary = MaskBoundaryOnPlane(mask, *plane_of);
   if (boundary.size() < 8) {
@@ -493,10 +529,13 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
   const double angle0 = guess.angle0;
   out.centre = guess.centre;
   const double band = std::max(kOutlineBandMm, kOutlineBandSpacings * spacing);
-  const SideCandidates side_cands =
-      GatherSideCandidates(xyz, mask, valid, frame, *plane_of, guess, band);
+  const SideBand side_band(xyz, mask, valid, frame, *plane_of, guess, band);
   const double tol = std::max(kOutlineHeightSigmas * noise_sigma, kOutlineHeightFloorMm);
-  const SideFits fits = FitSides(side_cands, guess, band, tol, spacing, &out.closed);
+  SideFits fits;
+  fits.tol = tol;
+  for (int s = 0; s < 4; ++s)
+    FitSide(s, side_band.Gather(s), guess, band, spacing, &out.closed[static_cast<size_t>(s)],
+            &fits);
   const std::array<double, 4>& delta = fits.delta;
   const std::array<double, 4>& weight = fits.weight;
   double wsum = 0, dsum = 0;
@@ -515,7 +554,8 @@ Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& v
       return out;
     }
   out.angle = angle0 + d;
-  PlaceSides(side_cands, fits, guess, spacing, &out);
+  // The candidates are gathered again, a side at a time, rather than held (SideBand says why).
+  for (int s = 0; s < 4; ++s) PlaceSide(s, side_band.Gather(s), fits, guess, spacing, &out);
   RectangleMask(xyz, mask, valid, frame, *plane_of, fits, tol, spacing, &out);
   return out;
 }

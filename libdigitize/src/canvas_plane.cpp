@@ -167,10 +167,7 @@ Result<PlaneFit> FitRoughPlane(const Grid<Vec3f>& xyz, const std::string& src) {
   return rough;
 }
 
-Result<CanvasPlane> FitCanvasPlane(const Grid<Vec3f>& xyz, const GrownRegion& region,
-                                   const PlaneFit& rough, const CanvasOptions& options,
-                                   const std::string& src) {
-  const int w = xyz.width, h = xyz.height;
+cv::Mat PlaneFitMask(const GrownRegion& region, const CanvasOptions& options) {
   const cv::Mat& filled = region.filled;
   const cv::Mat& valid = region.valid;
   const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(3, 3));
@@ -182,6 +179,14 @@ Result<CanvasPlane> FitCanvasPlane(const Grid<Vec3f>& xyz, const GrownRegion& re
   cv::bitwise_and(fit_mask, valid, fit_mask);  // valid is 0/1: nonzero where valid
   if (static_cast<size_t>(cv::countNonZero(fit_mask)) < kMinValidSamples)
     cv::bitwise_and(filled, valid, fit_mask);  // tiny canvas: fit on all of it
+  return fit_mask;
+}
+
+Result<CanvasPlane> FitCanvasPlane(const Grid<Vec3f>& xyz, const GrownRegion& region,
+                                   const PlaneFit& rough, const CanvasOptions& options,
+                                   const std::string& src) {
+  const int w = xyz.width, h = xyz.height;
+  cv::Mat fit_mask = PlaneFitMask(region, options);
   const size_t fit_mask_count = static_cast<size_t>(cv::countNonZero(fit_mask));
   // The fit samples, gathered once (a regular subsample of the eroded canvas).
   std::vector<Vec3f> fit_points;

@@ -265,10 +265,11 @@ Result<GrownRegion> GrowCanvasRegion(const Grid<Vec3f>& xyz, const PlaneFit& rou
                  "; nothing to grow the canvas from"};
   const int grown = cv::floodFill(grow, cv::Point(sx, sy), cv::Scalar(2), nullptr, cv::Scalar(0),
                                   cv::Scalar(0), 8);
-  cv::Mat region;
-  cv::compare(grow, 2, region, cv::CMP_EQ);  // 255 / 0
-  const cv::Mat islands = EnclosedIslands(region);
-  const size_t islands_px = static_cast<size_t>(cv::countNonZero(islands));
+  cv::Mat filled;
+  cv::compare(grow, 2, filled, cv::CMP_EQ);  // 255 / 0: the grown region
+  const size_t region_px = static_cast<size_t>(cv::countNonZero(filled));
+  FillEnclosedIslands(filled);
+  const size_t islands_px = static_cast<size_t>(cv::countNonZero(filled)) - region_px;
   const std::string seed_text = PointText(sx, sy);
   const std::string seed_hint =
       user_seed ? "" : "; the canvas may be off-centre: give a seed on the canvas (--seed X,Y)";
@@ -276,9 +277,6 @@ Result<GrownRegion> GrowCanvasRegion(const Grid<Vec3f>& xyz, const PlaneFit& rou
     return Error{src + ": the region grown from seed " + seed_text + " (" + std::to_string(grown) +
                  " px) encloses a larger area (" + std::to_string(islands_px) +
                  " px): the seed is on the frame or the wall, not on the canvas" + seed_hint};
-  cv::Mat filled;
-  cv::bitwise_or(region, islands, filled);
-  region.release();
   const size_t filled_px = static_cast<size_t>(grown) + islands_px;
   if (static_cast<double>(filled_px) <
       options.min_canvas_fraction * static_cast<double>(valid_count))

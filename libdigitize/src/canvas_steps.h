@@ -88,6 +88,10 @@ Result<GrownRegion> GrowCanvasRegion(const Grid<Vec3f>& xyz, const PlaneFit& rou
 
 // ---- 4. Robust plane on the eroded region: PCA, then trimmed refits (relief above, outliers
 // below). Error: too few canvas samples.
+// The samples the plane is fitted to: the grown region eroded by erode_px, valid ones only (all
+// of the region's valid ones on a tiny canvas). A function of the region alone, so it can be
+// made again rather than held through the steps between its users.
+cv::Mat PlaneFitMask(const GrownRegion& region, const CanvasOptions& options);
 struct CanvasPlane {
   cv::Mat fit_mask;  // the eroded region's valid samples the plane is fitted to
   size_t fit_mask_count = 0;
@@ -107,9 +111,16 @@ struct RefinedBoundary {
   cv::Mat mask;                         // 255 = canvas
   double spacing_x = 0, spacing_y = 0;  // median in-plane sample spacing (mm) along x and y
 };
+// The missing samples are not added yet: JoinMissingSamples does, after the caller has released
+// region.grow (read here only), so the two steps' masks are not held at once.
 RefinedBoundary RefineBoundary(const Grid<Vec3f>& xyz, const GrownRegion& region,
                                const LocalFrame& frame, double noise_sigma, size_t fit_mask_count,
                                const CanvasOptions& options);
+// Missing samples into the refined mask: those the grown region (`filled`) encloses, those with
+// mask pixels on both sides within kConvexReachPx along a row or a column, then everything the
+// mask encloses.
+constexpr int kConvexReachPx = 3;
+void JoinMissingSamples(const cv::Mat& filled, const cv::Mat& valid, cv::Mat& mask);
 
 // ---- 5b. Outline: the visible canvas as a rectangle in the plane (canvas_outline.cpp).
 struct Outline {
@@ -127,11 +138,11 @@ struct Outline {
 Eigen::Vector2d SideNormal(int s, double angle);
 
 // The rectangle fitted to `mask` (the refined boundary; `valid`: usable samples, `fit_mask`: the
-// samples the plane was fitted to), its sides, hidden edges and mask; not ok (and why in `note`)
-// when no rectangle fits or it disagrees with the mask.
+// samples the plane was fitted to, released once read: a caller that passes its only reference
+// frees it), its sides, hidden edges and mask; not ok (and why in `note`) when no rectangle fits
+// or it disagrees with the mask.
 Outline FitOutline(const Grid<Vec3f>& xyz, const cv::Mat& mask, const cv::Mat& valid,
-                   const cv::Mat& fit_mask, const LocalFrame& frame, double noise_sigma,
-                   double spacing);
+                   cv::Mat fit_mask, const LocalFrame& frame, double noise_sigma, double spacing);
 
 // ---- 7. The frame's boxes (canvas_frame.cpp). Per side, the scan points outside the canvas
 // outline, at most kFrameBandMm from it, within the side's span along the outline: the box's

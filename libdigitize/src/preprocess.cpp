@@ -169,7 +169,7 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
   t0 = Clock::now();
   ReportProgress(progress, "resample", 3.0 / kSteps);
   Result<HeightField> field =
-      ResampleToCanvasGrid(scan, result.canvas, options.resample, &result.resample);
+      ResampleToCanvasGrid(std::move(scan), result.canvas, options.resample, &result.resample);
   if (!field.ok()) return field.error();
   result.field = std::move(field).value();
   result.field.frame = result.canvas.frame;
@@ -179,7 +179,7 @@ Result<PreprocessResult> Preprocess(std::vector<Scan> exposures, const Preproces
               "%zu unfilled in %zu large hole(s)",
               result.field.width(), result.field.height(), result.field.pitch_mm, rs.measured,
               rs.filled, rs.holes_filled, rs.unfilled, rs.holes_unfilled));
-  // Later steps read the canvas grid only: the scan (12 bytes a sample) goes now.
+  // Later steps read the canvas grid only: the resample freed the scan's samples once drawn.
   scan = Scan();
 
   FinishPreprocess(result, options, progress);

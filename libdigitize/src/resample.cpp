@@ -530,8 +530,11 @@ Status ResampleOptions::Validate() const {
   return Status::Ok();
 }
 
-Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
-                                         const ResampleOptions& options, ResampleStats* stats) {
+namespace {
+
+// consumed: the scan to free once its triangles are drawn (null: the caller keeps it).
+Result<HeightField> Resample(const Scan& scan, const CanvasResult& canvas,
+                             const ResampleOptions& options, ResampleStats* stats, Scan* consumed) {
   using resample_detail::HoleMap;
   using resample_detail::HoleSizes;
   using resample_detail::StateCounts;
@@ -572,6 +575,7 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
   Grid<uint8_t> footprint(w, h, 0);  // texels inside mask quads whose triangles were not drawn
   const Counts counts = RasteriseBands(xyz, canvas.mask_scan, tf, predict, lists, plan,
                                        ranges.chunks_per_row, out, &footprint);
+  if (consumed) consumed->xyz_mm = Grid<Vec3f>();  // xyz is not read from here on
 
   cv::Mat height_mat(h, w, CV_32F, out);
   cv::Mat covered;
@@ -597,7 +601,18 @@ Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& c
     stats->triangles_skipped = counts.skipped;
   }
   return field;
-  return field;
+}
+
+}  // namespace
+
+Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options, ResampleStats* stats) {
+  return Resample(scan, canvas, options, stats, nullptr);
+}
+
+Result<HeightField> ResampleToCanvasGrid(Scan&& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options, ResampleStats* stats) {
+  return Resample(scan, canvas, options, stats, &scan);
 }
 
 }  // namespace digitize

@@ -180,7 +180,7 @@ HoleMap FindHoles(const cv::Mat& covered, Grid<uint8_t>* footprint) {
   map.covered = covered;
   cv::Mat& inside = map.inside;
   cv::bitwise_or(covered, cv::Mat(h, w, CV_8U, footprint->data.data()), inside);
-  cv::bitwise_or(inside, EnclosedIslands(inside), inside);
+  FillEnclosedIslands(inside);
   std::vector<uint8_t>().swap(footprint->data);
   cv::Mat& holes = map.holes;
   cv::bitwise_and(inside, ~covered, holes);

@@ -31,5 +31,10 @@ struct ResampleStats {
 Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
                                          const ResampleOptions& options,
                                          ResampleStats* stats = nullptr);
+// The same, consuming the scan: its samples (12 bytes each) are freed as soon as its triangles
+// are drawn, before the hole steps allocate theirs (the preprocess's peak at large scans).
+Result<HeightField> ResampleToCanvasGrid(Scan&& scan, const CanvasResult& canvas,
+                                         const ResampleOptions& options,
+                                         ResampleStats* stats = nullptr);
 
 }  // namespace digitize
