@@ -236,33 +236,6 @@ int main(int argc, char** argv) {
     rows.push_back(Describe(name, *r, set->photos.size(), *s));
   }
 
-  // 5. The GGX roughness grid evaluated whole at every texel, not walked from the Lafortune lobe.
-  ReflectanceFitOptions whole_grid = options;
-  whole_grid.fit.ggx_walk_from_lafortune = false;
-  auto grid = FitReflectance(canvas, normals, {}, *set, whole_grid);
-  if (!grid.ok()) return 1;
-  Row grid_row = Describe(
-      "whole fit: whole GGX grid", *grid, set->photos.size(),
-      *EvaluateHeldOut(canvas, normals, grid->maps, {}, truth.held_out, truth.held_out_mask));
-  grid_row.seconds_load = seconds_load;
-  grid_row.seconds_write = seconds_write;
-  grid_row.seconds_total = seconds_load + grid->report.seconds_total + seconds_write;
-  rows.push_back(grid_row);
-  // Texels whose fit differs in any map, and those whose model differs.
-  size_t texels_differ = 0, models_differ = 0;
-  {
-    const ReflectanceMaps &a = fast->maps, &b = grid->maps;
-    const auto differs = [](const auto& x, const auto& y, size_t i) {
-      return std::memcmp(&x.data[i], &y.data[i], sizeof(x.data[i])) != 0;
-    };
-    for (size_t i = 0; i < a.model.data.size(); ++i) {
-      texels_differ += differs(a.rho_d, b.rho_d, i) || differs(a.rho_s, b.rho_s, i) ||
-                       differs(a.lobe, b.lobe, i) || differs(a.fit_error, b.fit_error, i) ||
-                       differs(a.status, b.status, i) || differs(a.model, b.model, i);
-      models_differ += differs(a.model, b.model, i);
-    }
-  }
-
   std::printf("\n%-26s %9s %8s %8s %8s %8s %8s %8s %10s %8s %8s\n", "config", "texels", "load s",
               "samp. s", "fit s", "total s", "us/texel", "rays M", "skipped %", "PSNR dB", "RMSE");
   for (const Row& r : rows)
@@ -286,12 +259,6 @@ int main(int argc, char** argv) {
       rows[0].psnr_db, rows[1].psnr_db, identical ? "bit-identical" : "DIFFER");
   std::printf("ray skipping: samples %.2f s vs %.2f s without (%.1fx)\n", rows[0].seconds_samples,
               rows[2].seconds_samples, rows[2].seconds_samples / rows[0].seconds_samples);
-  std::printf(
-      "GGX grid walked from the Lafortune lobe vs evaluated whole: fit %.2f vs %.2f s (%.2fx); "
-      "PSNR %.4f vs %.4f dB; %zu of %zu texels differ (%zu in their model)\n",
-      rows[0].seconds_fit, grid_row.seconds_fit, grid_row.seconds_fit / rows[0].seconds_fit,
-      rows[0].psnr_db, grid_row.psnr_db, texels_differ, fast->maps.model.data.size(),
-      models_differ);
   std::printf("whole fit: %s\n", rows[0].brief.c_str());
 
   if (!csv_dir.empty()) {

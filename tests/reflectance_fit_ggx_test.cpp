@@ -12,7 +12,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <random>
 #include <string>
@@ -318,42 +317,6 @@ TEST(ReflectanceFitGgx, GgxTexelIsRecoveredExactly) {
       EXPECT_NEAR(fit.ggx.rho_d[c], truth.rho_d[c], 2e-3f);
     }
     EXPECT_LT(fit.rms_error, 1e-4f);
-  }
-}
-
-// The GGX roughness grid walked downhill from the Lafortune lobe's width (the default) starts
-// Brent's search where the whole grid does wherever the cost has one minimum over the grid: the
-// same fit, bit for bit, on every paint's noise-free texels. With noise a walk can stop in
-// another local minimum; there the fit may differ, but its error stays within 1 % of the whole
-// grid's (what the walk may lose), and most texels are still identical.
-TEST(ReflectanceFitGgx, GridWalkFromTheLobeStartsWhereTheWholeGridDoes) {
-  std::mt19937 rng(11);
-  const auto paints = synth::GgxPaintMaterials();
-  for (const float noise : {0.0f, 0.002f}) {
-    int texels = 0, identical = 0;
-    for (const synth::PaintMaterial& m : paints) {
-      if (!m.is_ggx) continue;
-      for (int i = 0; i < 25; ++i) {
-        const auto samples = RenderGgx(m.ggx, 2, 48, noise, rng);
-        BrdfFitOptions walk, grid;
-        walk.noise_sigma = grid.noise_sigma = std::max(1e-4f, noise);
-        grid.ggx_walk_from_lafortune = false;
-        const TexelFit a = FitBrdfTexel(samples, walk), b = FitBrdfTexel(samples, grid);
-        ++texels;
-        const bool same = a.model == b.model && a.status == b.status &&
-                          std::memcmp(&a.ggx, &b.ggx, sizeof(a.ggx)) == 0 &&
-                          std::memcmp(&a.params, &b.params, sizeof(a.params)) == 0 &&
-                          a.rms_error == b.rms_error;
-        identical += same;
-        if (noise == 0.0f)
-          EXPECT_TRUE(same) << m.name << " texel " << i << ": alpha " << a.ggx.alpha << " vs "
-                            << b.ggx.alpha;
-        else
-          EXPECT_LE(a.rms_error, 1.01f * b.rms_error) << m.name << " texel " << i;
-      }
-    }
-    std::printf("noise %.3f: %d of %d texels fitted identically\n", noise, identical, texels);
-    EXPECT_GE(identical, noise == 0.0f ? texels : texels * 9 / 10);
   }
 }
 

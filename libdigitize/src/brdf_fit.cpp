@@ -15,9 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <limits>
 #include <mutex>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -98,53 +96,25 @@ Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
 // method on that bracket finds the minimum the grid points at.
 constexpr double kGgxGridFactor = 1.5;
 
-// The grid's lowest point and its neighbours as Brent's bracket. With a hint (log alpha from the
-// texel's Lafortune lobe), the grid is walked downhill from the point nearest the hint until a
-// point is no higher than both neighbours, instead of evaluated whole: where the cost over the
-// grid has one minimum (the grid's premise above) that is the same point, so the same start and
-// the same fit, for ~4 evaluations instead of 12 (measured in bench/fit_bench.cpp).
-GgxStart GgxGridInit(TexelProblem& problem, const BrdfFitOptions& options,
-                     std::optional<double> t_hint) {
+GgxStart GgxGridInit(TexelProblem& problem, const BrdfFitOptions& options) {
   GgxStart start;
   start.t_lo = std::log(options.ggx_alpha_min);
   start.t_hi = std::log(options.ggx_alpha_max);
   const double step = std::log(kGgxGridFactor);
-  constexpr int kMaxPoints = 64;
-  const int count = std::min(
-      kMaxPoints, 1 + static_cast<int>(std::ceil((start.t_hi - start.t_lo) / step - 1e-9)));
-  std::array<double, kMaxPoints> costs;
-  costs.fill(std::numeric_limits<double>::quiet_NaN());
-  const auto t_at = [&](int i) { return std::min(start.t_lo + i * step, start.t_hi); };
-  const auto cost = [&](int i) {
-    double& c = costs[static_cast<size_t>(i)];
-    if (std::isnan(c)) problem.SolveGgx(std::exp(t_at(i)), nullptr, &c);
-    return c;
-  };
+  std::array<double, 64> costs{}, ts{};
+  const int count = std::min<int>(
+      costs.size(), 1 + static_cast<int>(std::ceil((start.t_hi - start.t_lo) / step - 1e-9)));
   int best = 0;
-  if (t_hint && std::isfinite(*t_hint)) {
-    best = std::clamp(static_cast<int>(std::lround((*t_hint - start.t_lo) / step)), 0, count - 1);
-    for (;;) {
-      // Ties go to the lower point, as in the whole grid's scan.
-      if (best > 0 && cost(best - 1) <= cost(best))
-        --best;
-      else if (best + 1 < count && cost(best + 1) < cost(best))
-        ++best;
-      else
-        break;
-    }
-  } else {
-    for (int i = 0; i < count; ++i)
-      if (cost(i) < cost(best)) best = i;
+  for (int i = 0; i < count; ++i) {
+    ts[i] = std::min(start.t_lo + i * step, start.t_hi);
+    problem.SolveGgx(std::exp(ts[i]), nullptr, &costs[i]);
+    if (costs[i] < costs[best]) best = i;
   }
-  start.t = t_at(best);
-  start.bracket_lo = t_at(std::max(0, best - 1));
-  start.bracket_hi = t_at(std::min(count - 1, best + 1));
+  start.t = ts[best];
+  start.bracket_lo = ts[std::max(0, best - 1)];
+  start.bracket_hi = ts[std::min(count - 1, best + 1)];
   return start;
 }
-
-// log alpha of the GGX lobe as wide as a Lafortune lobe of exponent k about the mirror direction:
-// (r.v)^k ~ exp(-2 k theta_h^2) and D ~ exp(-theta_h^2 / alpha^2) near the peak.
-double GgxHintFromLafortune(double k) { return -0.5 * std::log(2.0 * std::max(k, 1e-6)); }
 
 // Free parameters of each candidate, for the model choice (per texel, all three channels).
 constexpr int kDiffuseParameters = 3;    // rho_d
@@ -234,7 +204,6 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
   TexelFit best = out;
   best.status = TexelFitStatus::kDiffuseOnly;
   int iterations = 0;
-  std::optional<double> ggx_hint;  // log alpha, from a fitted Lafortune lobe
 
   if (options.fit_lafortune) {
     any_candidate = true;
@@ -261,8 +230,6 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
     if (!failed) {
       all_failed = false;
       if (lobe.linear.any_lobe()) {
-        if (options.ggx_walk_from_lafortune)
-          ggx_hint = GgxHintFromLafortune(std::exp(lobe.shape.t));
         problem.SetShape(lobe.shape, false);
         const double score = lobe.sse * chi2_scale + penalty * kLafortuneParameters;
         if (score < best_score) {
@@ -284,7 +251,7 @@ TexelFit FitTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& opt
   if (options.fit_ggx) {
     any_candidate = true;
     problem.PrepareGgx();
-    const GgxStart start = GgxGridInit(problem, options, ggx_hint);
+    const GgxStart start = GgxGridInit(problem, options);
     const GgxFitOutcome ggx = GgxSolverFor(options.method)(problem, start, options);
     iterations += ggx.iterations;
     GgxParams g;

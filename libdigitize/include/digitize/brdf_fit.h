@@ -193,11 +193,6 @@ struct BrdfFitOptions {
   bool photo_codes_srgb = true;
   double photo_compression_sigma_codes = 0.0;
   int num_threads = 0;  // worker threads; 0 = all cores
-  // Where the texel's Lafortune lobe was fitted, the GGX roughness grid is walked downhill from
-  // the lobe's width instead of evaluated whole (GgxGridInit in brdf_fit.cpp): the same start,
-  // so the same fit, wherever the cost has one minimum over the grid. false: the whole grid
-  // (bench/fit_bench.cpp compares the two). Like num_threads, not written to reports or plans.
-  bool ggx_walk_from_lafortune = true;
   Status Validate() const;
 };
 
