@@ -221,31 +221,6 @@ bool FindSeed(const cv::Mat& growable, int cx, int cy, int* sx, int* sy) {
 
 }  // namespace
 
-// Packed indices y * width + x of the nonzero pixels of a continuous 8-bit image, in raster
-// order; rows scanned in parallel, eight bytes at a time.
-std::vector<int> NonZeroIndices(const cv::Mat& image) {
-  const int w = image.cols, h = image.rows;
-  std::vector<std::vector<int>> per_row(static_cast<size_t>(h));
-  tbb::parallel_for(tbb::blocked_range<int>(0, h, 64), [&](const tbb::blocked_range<int>& r) {
-    for (int y = r.begin(); y < r.end(); ++y) {
-      const uint8_t* row = image.ptr<uint8_t>(y);
-      int x = 0;
-      for (; x + 8 <= w; x += 8) {
-        uint64_t word;
-        std::memcpy(&word, row + x, 8);
-        if (!word) continue;
-        for (int k = 0; k < 8; ++k)
-          if (row[x + k]) per_row[static_cast<size_t>(y)].push_back(y * w + x + k);
-      }
-      for (; x < w; ++x)
-        if (row[x]) per_row[static_cast<size_t>(y)].push_back(y * w + x);
-    }
-  });
-  std::vector<int> out;
-  for (const auto& v : per_row) out.insert(out.end(), v.begin(), v.end());
-  return out;
-}
-
 Result<GrownRegion> GrowCanvasRegion(const Grid<Vec3f>& xyz, const PlaneFit& rough,
                                      const CanvasOptions& options, const std::string& src) {
   const int w = xyz.width, h = xyz.height;

@@ -63,10 +63,6 @@ struct LocalFrame {
   }
 };
 
-// Packed indices y * width + x of the nonzero pixels of a continuous 8-bit image, in raster
-// order (canvas_region.cpp).
-std::vector<int> NonZeroIndices(const cv::Mat& image);
-
 // ---- 1. Rough plane of every usable sample (the frame and the wall included; only a rough
 // normal). Errors: too few valid samples, collinear samples.
 Result<PlaneFit> FitRoughPlane(const Grid<Vec3f>& xyz, const std::string& src);
