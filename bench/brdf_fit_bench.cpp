@@ -257,9 +257,10 @@ void WriteCsv(const std::filesystem::path& path) {
 }
 
 void PrintSideBySide() {
-  std::printf("\n%-9s %-9s %-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "method", "noise",
-              "us/texel", "CPU us/texel", "relight RMSE", "median (texel)", "p90 (texel)",
-              "p99 (texel)", "brief");
+  // One heading per column of the rows below (they were two short: printf read past them).
+  std::printf("\n%-9s %-9s %-6s %-7s %9s %13s %13s %15s %12s %12s  %s\n", "truth", "models",
+              "method", "noise", "us/texel", "CPU us/texel", "relight RMSE", "median (texel)",
+              "p90 (texel)", "p99 (texel)", "brief");
   for (const Row& r : g_rows)
     std::printf("%-9s %-9s %-6s %-7.4f %9.2f %13.2f %13.5f %15.5f %12.5f %12.5f  %s\n",
                 r.truth.c_str(), r.models.c_str(), r.method.c_str(), r.noise_sigma,

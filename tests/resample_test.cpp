@@ -281,6 +281,40 @@ TEST(ResampleToCanvasGrid, SmallHolesFilledLargeHolesReported) {
   EXPECT_LT(max_fill_err, 0.01);
 }
 
+// find_holes = false (the registration's fixed surface): the measured texels as the full
+// resample has them, bit for bit, every other texel outside at height 0, no hole filled.
+TEST(ResampleToCanvasGrid, WithoutHoleSearchMeasuredTexelsAreUnchanged) {
+  const Surface plane = [](double X, double Y) { return 0.2 + 0.005 * X + 0.003 * Y; };
+  SurfaceScan s = MakeSurfaceScan(plane, 256, 200, 5, 3);
+  for (int y = 100; y < 110; ++y)
+    for (int x = 60; x < 75; ++x) s.scan.xyz_mm(x, y) = Vec3f::Constant(kMissing);
+  ResampleStats full_stats, bare_stats;
+  const Result<HeightField> full =
+      ResampleToCanvasGrid(s.scan, s.canvas, ResampleOptions{}, &full_stats);
+  ResampleOptions bare_options;
+  bare_options.find_holes = false;
+  const Result<HeightField> bare = ResampleToCanvasGrid(s.scan, s.canvas, bare_options, &bare_stats);
+  ASSERT_TRUE(full.ok() && bare.ok());
+  ASSERT_EQ(full->width(), bare->width());
+  ASSERT_EQ(full->height(), bare->height());
+  ASSERT_GT(full_stats.filled, 0u);  // the case has a hole the full resample fills
+  size_t measured = 0;
+  for (int y = 0; y < full->height(); ++y)
+    for (int x = 0; x < full->width(); ++x) {
+      if (full->state(x, y) == TexelState::kMeasured) {
+        ++measured;
+        EXPECT_EQ(bare->state(x, y), TexelState::kMeasured);
+        EXPECT_EQ(bare->height_mm(x, y), full->height_mm(x, y));
+      } else {
+        EXPECT_EQ(bare->state(x, y), TexelState::kOutside);
+        EXPECT_EQ(bare->height_mm(x, y), 0.0f);
+      }
+    }
+  EXPECT_EQ(bare_stats.measured, measured);
+  EXPECT_EQ(bare_stats.filled + bare_stats.unfilled + bare_stats.holes_filled, 0u);
+  EXPECT_EQ(bare_stats.measured + bare_stats.outside, bare_stats.texels);
+}
+
 TEST(ResampleToCanvasGrid, OutsideTexelsAreZeroAndRollLeavesCornersOutside) {
   const SurfaceScan s = MakeSurfaceScan([](double, double) { return 1.0; }, 200, 160, 8, 20);
   // The truth extent is the canvas itself; roll does not change it (canvas frame), so to get

@@ -33,10 +33,10 @@ namespace digitize {
 namespace {
 
 // The target: no canvas point of a registered patch more than a quarter texel (of the
-// merged canvas, ~0.93 mm here) from where the true pose puts it. Measured 0.21 and 0.16 texel
-// in the two cases below (the in-plane rotation is what is left: ~0.05 deg over a patch's
-// 180 mm). The seeds here are the ones the work was tuned on; OtherSeedsStayWithinHalfATexel
-// says what holds on the others.
+// merged canvas, ~0.93 mm here) from where the true pose puts it. Measured 0.13 and 0.08 texel
+// in the two cases below (the in-plane rotation is what is left: a few hundredths of a degree
+// over a patch's 180 mm). The seeds here are the ones the work was tuned on;
+// OtherSeedsStayWithinAQuarterTexel says what holds on the others.
 constexpr double kMaxRegistrationErrorTexels = 0.25;
 // Scanner noise of the generator (ScanSimOptions::noise_mm, along the ray).
 constexpr double kNoiseMm = 0.02;
@@ -202,21 +202,16 @@ Measured RunCase(const Case& c, double max_error_texels = kMaxRegistrationErrorT
 TEST(ScanRegistration, Orthographic2x2) { RunCase(BaseCase()); }
 
 // The same case under other drifts and noise (the grid's seed): what the registration holds on
-// cases it was not tuned on. Measured 0.08-0.35 texel over seeds 1-9, 7 of them within the
-// issue's quarter texel, seam RMS 0.012-0.017 mm: every seed within half a texel and the seam
-// bound, at least 6 of 9 within a quarter (one of slack for another compiler's rounding).
-TEST(ScanRegistration, OtherSeedsStayWithinHalfATexel) {
-  constexpr double kUntunedMaxErrorTexels = 0.5;
-  int within_quarter = 0;
+// cases it was not tuned on. Measured over seeds 1-24: 0.03-0.24 texel (seeds 1-9: 0.03-0.16),
+// seam RMS 0.012-0.017 mm. Before patch 0 joined the global passes: 0.03-0.36, 6 of 24 over a
+// quarter texel (seeds 6 and 8 here at 0.36 and 0.29).
+TEST(ScanRegistration, OtherSeedsStayWithinAQuarterTexel) {
   for (uint64_t seed = 1; seed <= 9; ++seed) {
     Case c = BaseCase();
     c.grid.seed = seed;
     c.name = "ortho 2x2, grid seed " + std::to_string(seed);
-    const Measured m = RunCase(c, kUntunedMaxErrorTexels);
-    within_quarter += m.max_error_texels <= kMaxRegistrationErrorTexels;
+    RunCase(c);
   }
-  std::printf("%d of 9 seeds within a quarter texel\n", within_quarter);
-  EXPECT_GE(within_quarter, 6);
 }
 
 TEST(ScanRegistration, PinholeBowed3x2WithATiltedPatch) {

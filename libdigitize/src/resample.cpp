@@ -584,6 +584,26 @@ Result<HeightField> Resample(const Scan& scan, const CanvasResult& canvas,
     return Error{src + ": no canvas triangle could be drawn (" + std::to_string(counts.skipped) +
                  " skipped for edges longer than " + std::to_string(plan.edge_limit) +
                  " mm; a scan one sample wide has none)"};
+  if (!options.find_holes) {
+    size_t measured = 0;
+    for (size_t i = 0; i < field.state.data.size(); ++i) {
+      if (covered.data[i]) {
+        field.state.data[i] = TexelState::kMeasured;
+        ++measured;
+      } else {
+        out[i] = 0;
+      }
+    }
+    if (stats) {
+      *stats = ResampleStats{};
+      stats->texels = static_cast<size_t>(w) * h;
+      stats->measured = measured;
+      stats->outside = stats->texels - measured;
+      stats->triangles_drawn = counts.drawn;
+      stats->triangles_skipped = counts.skipped;
+    }
+    return field;
+  }
   HoleMap holes = resample_detail::FindHoles(covered, &footprint);
   const HoleSizes sizes = resample_detail::SplitLargeHoles(holes, plan.pitch, options);
   holes.holes.release();

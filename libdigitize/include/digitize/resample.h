@@ -19,6 +19,8 @@ struct ResampleOptions {
   double max_hole_area_mm2 = 4.0;   // holes up to this area are filled and reported; larger stay
                                     // kUnfilled
   int max_texels_per_side = 16384;  // refuse absurd grids (pitch too small for the canvas)
+  bool find_holes = true;  // false: texels no triangle covered are kOutside, no hole is sought
+                           // or filled (for callers that read the measured texels only)
   Status Validate() const;
 };
 
