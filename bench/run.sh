@@ -6,6 +6,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 ./build/bin/preprocess_bench --csv-dir=docs "$@" | tee docs/bench_preprocess.txt
 gnuplot bench/plot.gp && echo "wrote docs/bench_preprocess.png"
+./build/bin/registration_bench --csv-dir=docs | tee docs/bench_registration.txt
 ./build/bin/brdf_fit_bench --csv-dir=docs | tee docs/bench_brdf_fit.txt
 ./build/bin/fit_bench --csv-dir=docs | tee docs/bench_fit.txt
 gnuplot bench/plot_fit.gp && echo "wrote docs/bench_fit.png"

@@ -293,7 +293,8 @@ TEST(ResampleToCanvasGrid, WithoutHoleSearchMeasuredTexelsAreUnchanged) {
       ResampleToCanvasGrid(s.scan, s.canvas, ResampleOptions{}, &full_stats);
   ResampleOptions bare_options;
   bare_options.find_holes = false;
-  const Result<HeightField> bare = ResampleToCanvasGrid(s.scan, s.canvas, bare_options, &bare_stats);
+  const Result<HeightField> bare =
+      ResampleToCanvasGrid(s.scan, s.canvas, bare_options, &bare_stats);
   ASSERT_TRUE(full.ok() && bare.ok());
   ASSERT_EQ(full->width(), bare->width());
   ASSERT_EQ(full->height(), bare->height());
