@@ -212,6 +212,7 @@ TEST(PhotometricStereo, WrittenCaptureReadsBackThroughTheRtiReader) {
   o.lights = 24;
   const auto cap = synth::SimulateRti(painting, o);
   const auto dir = test::FreshScratchDir("rti_sim");
+  const test::RemoveOnExit remove(dir);
   ASSERT_TRUE(synth::WriteSyntheticRti(dir, cap).ok());
   PhotoSetOptions read;
   read.rti_pixel_pitch_mm = cap.pitch_mm;

@@ -53,6 +53,7 @@ Shared& Get() {
     tpo.relief.delta0_fraction = 0.30;
     s->pack = synth::MakeTruthPack(synth::MakePainting(po), tpo);
     s->dir = test::FreshScratchDir("digitize_pyramid_stream");
+    static const test::RemoveOnExit remove(s->dir);  // at the process's exit
     s->file = s->dir / "painting.pack.exr";
     PackWriteOptions o;
     o.tile_size = kTile;

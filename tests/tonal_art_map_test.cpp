@@ -150,7 +150,8 @@ TEST(TonalArtMap, ContactSheetIsWritten) {
           sheet(t * (cell + gap) + x, l * (cell + gap) + y) = static_cast<uint8_t>(
               std::lround(255.0 * (1.0 - g(x * g.width / cell, y * g.height / cell))));
     }
-  const auto path = test::ScratchPath("tonal_art_map", "sheet.png");
+  // One file, replaced by every run (named per process, one was left behind per run).
+  const auto path = std::filesystem::temp_directory_path() / "digitize_tonal_art_map_sheet.png";
   ASSERT_TRUE(WritePng8(path, sheet).ok());
   std::printf("contact sheet: %s\n", path.c_str());
 }

@@ -37,6 +37,23 @@ inline std::filesystem::path FreshScratchDir(const std::string& prefix,
   return dir;
 }
 
+// Removes `path` (a folder or a file) when it goes out of scope: scratch space that a test, or
+// a suite's shared data, makes outside a ScratchDirTest, so that no run leaves files behind in
+// the temp folder (they were piling up, one folder per run).
+class RemoveOnExit {
+ public:
+  explicit RemoveOnExit(std::filesystem::path path) : path_(std::move(path)) {}
+  ~RemoveOnExit() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  RemoveOnExit(const RemoveOnExit&) = delete;
+  RemoveOnExit& operator=(const RemoveOnExit&) = delete;
+
+ private:
+  std::filesystem::path path_;
+};
+
 // A fixture with one scratch folder per test, dir_ = ScratchPath(prefix, test name) (or
 // ScratchPath(prefix) when `per_test` is false), fresh before the test and removed after it.
 // `create` false: the folder does not exist when the test starts (tests of writers that make it).
