@@ -97,7 +97,7 @@ struct PatchRegistrationOptions {
   int global_rounds = 4;              // polish passes of every patch against all others
                                       // (block Gauss-Seidel: the in-plane rotation settles
                                       // slowly; 2 / 3 / 4 passes: worst 0.253 / 0.249 / 0.244
-                                      // texel over 24 grid seeds)
+                                      // texel over a 2 x 2 grid's seeds 1-24)
   double max_correction_mm = 25;      // a correction moving a canvas point more: an error
   double max_overlap_rms_mm = 0.15;   // an overlap whose height residual RMS is larger: an error
   double feather_mm = 8;              // blend ramp at each patch's border
