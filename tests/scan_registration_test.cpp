@@ -253,6 +253,11 @@ TEST(ScanRegistration, PinholeBowed3x2WithATiltedPatch) {
 // texel, the whole sits 0.3 texel off against patch 0. Asserted: the best gauge within the
 // quarter texel (RunCase), patch 0's within half a texel.
 TEST(ScanRegistration, Orthographic4x3Chain) {
+#ifdef __SANITIZE_ADDRESS__
+  // 96 s under ASan (5 s in Release, which runs it): the 2 x 2 and 3 x 2 cases take the same
+  // code paths here.
+  GTEST_SKIP() << "the 4 x 3 grid runs in the Release build only (18x slower under ASan)";
+#endif
   Case c = BaseCase();
   c.name = "ortho 4x3";
   c.painting.width_mm = 520, c.painting.height_mm = 330;
