@@ -1,19 +1,15 @@
 // A canvas from overlapping patches (scan_registration.h), against the generator's truth
 // (patch_sim.h): registration error, seam residual, unlike cases, degenerate input.
 //
-// Registration error of a patch: the gauge is fixed by patch 0 (G = true_0 * registered_0^-1: the
-// registration places the patches relative to each other, not in the rig), then the largest
-// distance, over the patch's true canvas samples p, between G * registered_i * p and true_i * p,
-// in texels of the merged canvas; also in the gauge that best fits the whole mosaic to its truth
-// (Measured::best_gauge_error_texels). Seam residual: the merged height against the true surface
-// (mapped into the true canvas frame through patch 0), RMS over the texels two or more patches
-// measured, compared with the RMS where one patch did.
+// Registration error: synth::MeasureRegistration (ground_truth.h), in patch 0's gauge and in the
+// best rigid gauge, in texels of the merged canvas. Seam residual: the merged height against the
+// true surface (mapped into the true canvas frame through patch 0), RMS over the texels two or
+// more patches measured, compared with the RMS where one patch did.
 #include "digitize/scan_registration.h"
 
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
-#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -25,6 +21,7 @@
 
 #include "digitize/preprocess.h"
 #include "digitize/scan_io.h"
+#include "digitize_synth/ground_truth.h"
 #include "digitize_synth/painting.h"
 #include "digitize_synth/patch_sim.h"
 #include "digitize_synth/scan_sim.h"
@@ -52,27 +49,8 @@ constexpr double kMaxSeamRmsMm = 1.5 * kNoiseMm;
 // noisy fields, sqrt(2) x 0.016 mm ~ 0.023 mm, plus the relief's slope x the registration error.
 constexpr double kMaxOverlapRmsMm = 0.035;
 
-struct Case {
-  std::string name;
-  synth::PaintingOptions painting;
-  synth::FrameOptions frame;
-  synth::PatchGridOptions grid;
-};
-
-Case BaseCase() {
-  Case c;
-  c.name = "ortho 2x2";
-  c.painting.width_mm = 300, c.painting.height_mm = 220;
-  c.painting.seed = 3;
-  c.painting.stroke_count = 150;
-  c.grid.scan.model = synth::ScannerModel::kOrthographic;
-  c.grid.scan.width_px = 200;
-  c.grid.scan.tilt_deg = 3, c.grid.scan.roll_deg = 1;
-  c.grid.scan.offset_mm = Vec3d::Zero();
-  c.grid.scan.hole_blobs = 1;
-  c.grid.seed = 5;
-  return c;
-}
+using Case = synth::PatchScanCase;
+Case BaseCase() { return synth::Orthographic2x2Case(); }
 
 std::vector<ScanPatch> Inputs(const synth::SyntheticPatchScan& scan) {
   std::vector<ScanPatch> in;
@@ -82,11 +60,8 @@ std::vector<ScanPatch> Inputs(const synth::SyntheticPatchScan& scan) {
 }
 
 struct Measured {
-  double max_error_texels = 0;
-  // The same in the gauge of the rigid motion that best maps the whole registered mosaic onto
-  // its truth (least squares, no scale): the mosaic's own error, however far a patch is from
-  // patch 0 (the canvas frame is fitted to all patches, not to patch 0).
-  double best_gauge_error_texels = 0;
+  // Registration error in patch 0's gauge and in the best rigid gauge (synth::MeasureRegistration).
+  double max_error_texels = 0, best_gauge_error_texels = 0;
   double seam_rms_mm = 0, single_rms_mm = 0;
   size_t seam_texels = 0, single_texels = 0;
   double worst_overlap_rms_mm = 0;
@@ -103,31 +78,9 @@ double Bilinear(const Grid<float>& g, double x, double y) {
 Measured Measure(const synth::Painting& painting, const synth::SyntheticPatchScan& scan,
                  const PatchRegistrationResult& r) {
   Measured m;
-  const double pitch = r.field.pitch_mm;
-  const RigidTransform gauge =
-      scan.patches[0].scan.canvas_from_scan * r.patches[0].rig_from_scan.Inverse();
-  std::vector<Vec3d> placed, truth;  // every canvas sample: registered (patch 0's gauge), true
-  for (size_t i = 0; i < scan.patches.size(); ++i) {
-    const synth::SyntheticScan& s = scan.patches[i].scan;
-    const RigidTransform est = gauge * r.patches[i].rig_from_scan;
-    const Grid<Vec3f>& xyz = s.exposures[0].xyz_mm;
-    for (size_t k = 0; k < xyz.data.size(); ++k) {
-      if (!s.canvas_mask_scan.data[k] || !IsValid(xyz.data[k])) continue;
-      const Vec3d p = xyz.data[k].cast<double>();
-      m.max_error_texels =
-          std::max(m.max_error_texels, (est.Apply(p) - s.canvas_from_scan.Apply(p)).norm() / pitch);
-      placed.push_back(est.Apply(p));
-      truth.push_back(s.canvas_from_scan.Apply(p));
-    }
-  }
-  Eigen::Matrix3Xd a(3, placed.size()), b(3, placed.size());
-  for (size_t k = 0; k < placed.size(); ++k) a.col(k) = placed[k], b.col(k) = truth[k];
-  const Eigen::Matrix4d best = Eigen::umeyama(a, b, false);
-  for (size_t k = 0; k < placed.size(); ++k) {
-    const Vec3d moved = best.topLeftCorner<3, 3>() * placed[k] + best.topRightCorner<3, 1>();
-    m.best_gauge_error_texels =
-        std::max(m.best_gauge_error_texels, (moved - truth[k]).norm() / pitch);
-  }
+  const synth::RegistrationAccuracy accuracy = synth::MeasureRegistration(scan, r);
+  m.max_error_texels = accuracy.max_error_texels;
+  m.best_gauge_error_texels = accuracy.best_gauge_error_texels;
   // Heights: estimated canvas -> true canvas through patch 0.
   const RigidTransform to_truth =
       scan.patches[0].scan.canvas_from_scan *
@@ -169,13 +122,7 @@ Measured Measure(const synth::Painting& painting, const synth::SyntheticPatchSca
 }
 
 synth::SyntheticPatchScan Simulate(const Case& c, synth::Painting* painting_out = nullptr) {
-  synth::PaintingOptions po = c.painting;
-  po.resolution_px = synth::MatchedPatchResolution(po, c.grid);
-  const synth::Painting painting = synth::MakePainting(po);
-  const synth::Scene scene(painting, c.frame);
-  synth::SyntheticPatchScan scan = synth::SimulatePatchScan(scene, c.grid);
-  if (painting_out) *painting_out = painting;
-  return scan;
+  return synth::SimulateCase(c, painting_out);
 }
 
 Measured RunCase(const Case& c, double max_error_texels = kMaxRegistrationErrorTexels) {
@@ -232,20 +179,7 @@ TEST(ScanRegistration, OtherSeedsStayWithinAQuarterTexel) {
   }
 }
 
-TEST(ScanRegistration, PinholeBowed3x2WithATiltedPatch) {
-  Case c = BaseCase();
-  c.name = "pinhole 3x2 bowed";
-  c.painting.width_mm = 380, c.painting.height_mm = 220;
-  c.painting.bow_mm = 3;
-  c.painting.seed = 11;
-  c.grid.columns = 3;
-  c.grid.scan.model = synth::ScannerModel::kPinhole;
-  c.grid.scan.distance_mm = 400;
-  c.grid.scan.width_px = 170;
-  c.grid.tilted_patch = 4, c.grid.tilted_patch_deg = 6;
-  c.grid.seed = 8;
-  RunCase(c);
-}
+TEST(ScanRegistration, PinholeBowed3x2WithATiltedPatch) { RunCase(synth::PinholeBowed3x2Case()); }
 
 // A longer chain: 12 patches, the far ones four overlaps from patch 0. Measured 0.30 texel in
 // patch 0's gauge (each overlap's error adds up along the chain; 0.34 / 0.27 at 2 / 8 global
@@ -258,12 +192,7 @@ TEST(ScanRegistration, Orthographic4x3Chain) {
   // code paths here.
   GTEST_SKIP() << "the 4 x 3 grid runs in the Release build only (18x slower under ASan)";
 #endif
-  Case c = BaseCase();
-  c.name = "ortho 4x3";
-  c.painting.width_mm = 520, c.painting.height_mm = 330;
-  c.painting.stroke_count = 400;
-  c.painting.seed = 7;
-  c.grid.columns = 4, c.grid.rows = 3;
+  const Case c = synth::Orthographic4x3Case();
   RunCase(c, 0.5);
 }
 

@@ -1,9 +1,11 @@
-// Accuracy of a preprocessing result against the generator's ground truth (ground_truth.h).
+// Accuracy of a preprocessing result, and of a patch registration, against the generator's
+// ground truth (ground_truth.h).
 #include "digitize_synth/ground_truth.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -206,6 +208,38 @@ PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Paintin
     }
   }
   return acc;
+}
+
+RegistrationAccuracy MeasureRegistration(const SyntheticPatchScan& scan,
+                                         const PatchRegistrationResult& result) {
+  RegistrationAccuracy m;
+  const double pitch = result.field.pitch_mm;
+  const RigidTransform gauge =
+      scan.patches[0].scan.canvas_from_scan * result.patches[0].rig_from_scan.Inverse();
+  std::vector<Vec3d> placed, truth;  // every canvas sample: registered (patch 0's gauge), true
+  for (size_t i = 0; i < scan.patches.size(); ++i) {
+    const SyntheticScan& s = scan.patches[i].scan;
+    const RigidTransform est = gauge * result.patches[i].rig_from_scan;
+    const Grid<Vec3f>& xyz = s.exposures[0].xyz_mm;
+    for (size_t k = 0; k < xyz.data.size(); ++k) {
+      if (!s.canvas_mask_scan.data[k] || !IsValid(xyz.data[k])) continue;
+      const Vec3d p = xyz.data[k].cast<double>();
+      placed.push_back(est.Apply(p));
+      truth.push_back(s.canvas_from_scan.Apply(p));
+      m.max_error_texels = std::max(m.max_error_texels, (placed.back() - truth.back()).norm());
+    }
+  }
+  if (placed.empty()) return m;
+  Eigen::Matrix3Xd a(3, placed.size()), b(3, placed.size());
+  for (size_t k = 0; k < placed.size(); ++k) a.col(k) = placed[k], b.col(k) = truth[k];
+  const Eigen::Matrix4d best = Eigen::umeyama(a, b, false);
+  for (size_t k = 0; k < placed.size(); ++k) {
+    const Vec3d moved = best.topLeftCorner<3, 3>() * placed[k] + best.topRightCorner<3, 1>();
+    m.best_gauge_error_texels = std::max(m.best_gauge_error_texels, (moved - truth[k]).norm());
+  }
+  m.max_error_texels /= pitch;
+  m.best_gauge_error_texels /= pitch;
+  return m;
 }
 
 }  // namespace digitize::synth

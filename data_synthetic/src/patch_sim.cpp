@@ -53,6 +53,56 @@ int MatchedPatchResolution(const PaintingOptions& painting, const PatchGridOptio
   return std::clamp(static_cast<int>(long_side / (1.1 * pitch)), 64, 8192);
 }
 
+PatchScanCase Orthographic2x2Case() {
+  PatchScanCase c;
+  c.name = "ortho 2x2";
+  c.painting.width_mm = 300, c.painting.height_mm = 220;
+  c.painting.seed = 3;
+  c.painting.stroke_count = 150;
+  c.grid.scan.model = ScannerModel::kOrthographic;
+  c.grid.scan.width_px = 200;
+  c.grid.scan.tilt_deg = 3, c.grid.scan.roll_deg = 1;
+  c.grid.scan.offset_mm = Vec3d::Zero();
+  c.grid.scan.hole_blobs = 1;
+  c.grid.seed = 5;
+  return c;
+}
+
+PatchScanCase PinholeBowed3x2Case() {
+  PatchScanCase c = Orthographic2x2Case();
+  c.name = "pinhole 3x2 bowed";
+  c.painting.width_mm = 380, c.painting.height_mm = 220;
+  c.painting.bow_mm = 3;
+  c.painting.seed = 11;
+  c.grid.columns = 3;
+  c.grid.scan.model = ScannerModel::kPinhole;
+  c.grid.scan.distance_mm = 400;
+  c.grid.scan.width_px = 170;
+  c.grid.tilted_patch = 4, c.grid.tilted_patch_deg = 6;
+  c.grid.seed = 8;
+  return c;
+}
+
+PatchScanCase Orthographic4x3Case() {
+  PatchScanCase c = Orthographic2x2Case();
+  c.name = "ortho 4x3";
+  c.painting.width_mm = 520, c.painting.height_mm = 330;
+  c.painting.stroke_count = 400;
+  c.painting.seed = 7;
+  c.grid.columns = 4, c.grid.rows = 3;
+  return c;
+}
+
+SyntheticPatchScan SimulateCase(const PatchScanCase& c, Painting* painting_out) {
+  PaintingOptions po = c.painting;
+  po.resolution_px = MatchedPatchResolution(po, c.grid);
+  const Painting painting = MakePainting(po);
+  const Scene scene(painting, c.frame);
+  SyntheticPatchScan scan = SimulatePatchScan(scene, c.grid);
+  if (painting_out) *painting_out = painting;
+  return scan;
+}
+
 SyntheticPatchScan SimulatePatchScan(const Scene& scene, const PatchGridOptions& options) {
   const Status valid = options.Validate();
   DIGITIZE_CHECK(valid.ok(), "SimulatePatchScan: " + valid.message());

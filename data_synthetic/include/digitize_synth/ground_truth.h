@@ -1,4 +1,5 @@
-// Accuracy of preprocessing against the generator's ground truth (tests and benchmarks use it).
+// Accuracy of preprocessing, and of patch registration, against the generator's ground truth
+// (tests and benchmarks use it).
 //
 // Frames: T = truth.canvas_from_scan * estimate.canvas_from_scan.Inverse() maps the estimated
 // canvas frame into the true one. Estimated texels are mapped through T and compared with the true
@@ -7,7 +8,9 @@
 #pragma once
 
 #include "digitize/preprocess.h"
+#include "digitize/scan_registration.h"
 #include "digitize_synth/painting.h"
+#include "digitize_synth/patch_sim.h"
 #include "digitize_synth/scan_sim.h"
 
 namespace digitize::synth {
@@ -66,5 +69,20 @@ struct AccuracyOptions {
 // another size than the scan gives IoU 0.
 PreprocessAccuracy MeasureAccuracy(const PreprocessResult& result, const Painting& painting,
                                    const SyntheticScan& scan, const AccuracyOptions& options = {});
+
+// Registration error of patches (scan_registration.h) against their true poses: the farthest any
+// registered canvas sample lies from its true place, in texels of the merged canvas (pitch of
+// result.field), with two gauges (the registration places the patches relative to each other,
+// not in the rig):
+//   patch 0's: G = true_0 * registered_0^-1 maps every registered pose into the truth;
+//   best: the rigid motion (least squares, no scale) that best maps the whole registered mosaic
+//     onto its truth, the mosaic's own error however far a patch is from patch 0 (the canvas
+//     frame is fitted to all patches, not to patch 0).
+struct RegistrationAccuracy {
+  double max_error_texels = 0;
+  double best_gauge_error_texels = 0;
+};
+RegistrationAccuracy MeasureRegistration(const SyntheticPatchScan& scan,
+                                         const PatchRegistrationResult& result);
 
 }  // namespace digitize::synth

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "digitize/core.h"
@@ -46,6 +47,25 @@ SyntheticPatchScan SimulatePatchScan(const Scene& scene, const PatchGridOptions&
 
 // Painting resolution whose texel pitch is about 1.1x the patches' sample spacing.
 int MatchedPatchResolution(const PaintingOptions& painting, const PatchGridOptions& options);
+
+// The registration cases that tests/scan_registration_test.cpp and bench/registration_bench.cpp
+// share: a painting, its frame and a patch grid, unlike each other.
+struct PatchScanCase {
+  std::string name;
+  PaintingOptions painting;
+  FrameOptions frame;
+  PatchGridOptions grid;
+};
+// 2 x 2 orthographic patches of 200 samples (3 deg tilt, 1 deg roll, a hole blob each) over a
+// 300 x 220 mm painting; grid seed 5.
+PatchScanCase Orthographic2x2Case();
+// 3 x 2 pinhole patches (400 mm away, 170 samples) over a 380 x 220 mm canvas bowed 3 mm, patch 4
+// tilted 6 deg more; grid seed 8.
+PatchScanCase PinholeBowed3x2Case();
+// 4 x 3 orthographic patches over 520 x 330 mm: its far patches four overlaps from patch 0.
+PatchScanCase Orthographic4x3Case();
+// The case's painting (at MatchedPatchResolution) and its patch scan.
+SyntheticPatchScan SimulateCase(const PatchScanCase& c, Painting* painting_out = nullptr);
 
 // dir: patch_R_C.exr (R row, C column), patches.json (the patch list with the NOMINAL poses,
 // docs/formats.md), truth_height.exr, truth_patches.json (the TRUE canvas_from_scan per patch).
