@@ -673,9 +673,15 @@ void ExpectRoundTrip(const fs::path& dir, const SyntheticPhotoSet& set) {
     ASSERT_EQ(lobe->pixels[3 * p + 1], c[1]);
     ASSERT_EQ(lobe->pixels[3 * p + 2], c[3]);
   }
-  auto rho_s = ReadImage(dir / "truth" / "rho_s.exr");
-  ASSERT_TRUE(rho_s.ok());
-  EXPECT_EQ(rho_s->pixels[3 * 7 + 1], set.truth.rho_s.data[7].y());
+  // The files are made from material_index a map at a time; they hold the set's truth exactly.
+  for (const auto& [file, truth] :
+       {std::pair{"rho_d.exr", &set.truth.rho_d}, std::pair{"rho_s.exr", &set.truth.rho_s}}) {
+    auto map = ReadImage(dir / "truth" / file);
+    ASSERT_TRUE(map.ok()) << map.error().message;
+    ASSERT_EQ(map->pixels.size(), 3 * truth->size()) << file;
+    for (size_t p = 0; p < truth->size(); ++p)
+      for (int c = 0; c < 3; ++c) ASSERT_EQ(map->pixels[3 * p + c], truth->data[p][c]) << file;
+  }
   auto material = ReadImage(dir / "truth" / "material.png");
   ASSERT_TRUE(material.ok());
   for (size_t p = 0; p < set.material_index.size(); ++p)
@@ -842,6 +848,9 @@ TEST_F(PhotoSimTest, StreamedWriterWritesTheFilesOfTheInMemoryOne) {
                   .ok());
   EXPECT_TRUE(summary.pixels_released);
   EXPECT_TRUE(summary.fit.photos[0].rgb.data.empty());
+  // Nor the truth maps (44 bytes a texel): the files under truth/ are made from material_index.
+  EXPECT_TRUE(summary.truth.empty());
+  EXPECT_EQ(summary.material_index.data, in_memory.material_index.data);
   EXPECT_EQ(summary.saturated_pixels, in_memory.saturated_pixels);
   EXPECT_EQ(summary.Brief().substr(0, 60), in_memory.Brief().substr(0, 60));
   size_t files = 0;

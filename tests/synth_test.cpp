@@ -99,6 +99,10 @@ TEST(PaintingOptions, DefaultsAreValidAndBadValuesAreNamed) {
   Status s = o.Validate();
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("resolution_px"), std::string::npos) << s.message();
+  o.resolution_px = 16384;  // the largest: a 16k painting for the tiles bench (~13.5 GB)
+  EXPECT_TRUE(o.Validate().ok()) << o.Validate().message();
+  o.resolution_px = 16385;
+  EXPECT_FALSE(o.Validate().ok());
   o = {};
   o.width_mm = -1;
   EXPECT_NE(o.Validate().message().find("width_mm"), std::string::npos);

@@ -682,8 +682,8 @@ Status PaintingOptions::Validate() const {
     return fail("width_mm must be in (0, 100000], got " + FormatNumber(width_mm));
   if (!(std::isfinite(height_mm) && height_mm > 0 && height_mm <= 1e5))
     return fail("height_mm must be in (0, 100000], got " + FormatNumber(height_mm));
-  if (resolution_px < 64 || resolution_px > 8192)
-    return fail("resolution_px must be in [64, 8192], got " + std::to_string(resolution_px));
+  if (resolution_px < 64 || resolution_px > 16384)
+    return fail("resolution_px must be in [64, 16384], got " + std::to_string(resolution_px));
   if (std::max(width_mm, height_mm) / std::min(width_mm, height_mm) > resolution_px)
     return fail("canvas aspect ratio " +
                 FormatNumber(std::max(width_mm, height_mm) / std::min(width_mm, height_mm)) +

@@ -70,7 +70,7 @@ PatchScanCase Orthographic2x2Case() {
 
 PatchScanCase PinholeBowed3x2Case() {
   PatchScanCase c = Orthographic2x2Case();
-  c.name = "pinhole 3x2 bowed";
+  c.name = "pinhole 3x2 bowed, tilted patch";
   c.painting.width_mm = 380, c.painting.height_mm = 220;
   c.painting.bow_mm = 3;
   c.painting.seed = 11;

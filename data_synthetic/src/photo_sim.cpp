@@ -573,6 +573,27 @@ std::string SyntheticPhotoSet::Brief() const {
   return buf;
 }
 
+ReflectanceMaps MaterialTruth(const std::vector<PaintMaterial>& materials) {
+  ReflectanceMaps out = ReflectanceMaps::Zeros(static_cast<int>(materials.size()), 1);
+  for (size_t i = 0; i < materials.size(); ++i) {
+    const int x = static_cast<int>(i);
+    const PaintMaterial& m = materials[i];
+    if (m.is_measured) {
+      LafortuneParams diffuse;  // rho_s = 0: the measured diffuse term only
+      diffuse.rho_d = m.measured.diffuse_albedo / static_cast<float>(kPi);
+      out.Set(x, 0, diffuse);
+      out.status(x, 0) = TexelFitStatus::kDiffuseOnly;
+    } else if (m.is_ggx) {
+      out.SetGgx(x, 0, m.ggx);
+      out.status(x, 0) = TexelFitStatus::kConverged;
+    } else {
+      out.Set(x, 0, m.lafortune);
+      out.status(x, 0) = TexelFitStatus::kConverged;
+    }
+  }
+  return out;
+}
+
 SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& canvas_from_scan,
                                    const PhotoSimOptions& options,
                                    std::vector<PaintMaterial> materials,
@@ -607,28 +628,14 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
   out.canvas_from_scan = canvas_from_scan;
   out.materials = materials;
 
-  // Ground truth on the texel grid.
+  // Which paint each texel is; the truth maps follow it once the photos are rendered (below).
   out.material_index = Grid<uint8_t>(tw, th, 0);
   out.measured_texel = Grid<uint8_t>(tw, th, 0);
-  out.truth = ReflectanceMaps::Zeros(tw, th);
   for (int y = 0; y < th; ++y) {
     for (int x = 0; x < tw; ++x) {
       const size_t mi = painting.region(x, y) % materials.size();
       out.material_index(x, y) = static_cast<uint8_t>(mi);
-      const PaintMaterial& m = materials[mi];
-      if (m.is_measured) {
-        LafortuneParams diffuse;  // rho_s = 0: the measured diffuse term only
-        diffuse.rho_d = m.measured.diffuse_albedo / static_cast<float>(kPi);
-        out.truth.Set(x, y, diffuse);
-        out.truth.status(x, y) = TexelFitStatus::kDiffuseOnly;
-        out.measured_texel(x, y) = 1;
-      } else if (m.is_ggx) {
-        out.truth.SetGgx(x, y, m.ggx);
-        out.truth.status(x, y) = TexelFitStatus::kConverged;
-      } else {
-        out.truth.Set(x, y, m.lafortune);
-        out.truth.status(x, y) = TexelFitStatus::kConverged;
-      }
+      out.measured_texel(x, y) = materials[mi].is_measured ? 1 : 0;
     }
   }
 
@@ -910,6 +917,24 @@ SyntheticPhotoSet SimulatePhotoSet(const Scene& scene, const RigidTransform& can
         if (!st.ok() && out.sink_status.ok()) out.sink_status = st;
       }
       if (!out.sink_status.ok()) break;
+    }
+  }
+
+  // Ground truth on the texel grid, made after the render (which reads material_index only), and
+  // only for a set kept in memory: a sink's writer makes the truth files a map at a time from
+  // material_index. The whole maps (44 bytes a texel) were the generator's peak at 8192 texels.
+  if (!sink) {
+    const ReflectanceMaps of_material = MaterialTruth(out.materials);
+    out.truth = ReflectanceMaps::Zeros(tw, th);
+    for (int y = 0; y < th; ++y) {
+      for (int x = 0; x < tw; ++x) {
+        const int m = out.material_index(x, y);
+        out.truth.rho_d(x, y) = of_material.rho_d(m, 0);
+        out.truth.rho_s(x, y) = of_material.rho_s(m, 0);
+        out.truth.lobe(x, y) = of_material.lobe(m, 0);
+        out.truth.status(x, y) = of_material.status(m, 0);
+        out.truth.model(x, y) = of_material.model(m, 0);
+      }
     }
   }
 

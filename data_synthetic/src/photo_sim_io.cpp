@@ -323,23 +323,33 @@ Status WriteTruthAndCalibration(const fs::path& dir, const SyntheticPhotoSet& se
     mask_paths.push_back(MaskPath(i));
   }
 
-  // Truth on the painting's texel grid.
-  const ReflectanceMaps& t = set.truth;
+  // Truth on the painting's texel grid, a map at a time from each texel's material (a set
+  // rendered into a sink keeps no truth maps; a set in memory holds the same values).
+  const ReflectanceMaps of_material = MaterialTruth(set.materials);
+  const Grid<uint8_t>& material = set.material_index;
+  const auto map_of = [&](const auto& value) {
+    Grid<Vec3f> g(material.width, material.height);
+    for (size_t i = 0; i < g.size(); ++i) g.data[i] = value(material.data[i]);
+    return g;
+  };
   const ImageMetadata meta = {{"digitize:frame", "canvas texel grid (row 0 = top)"},
                               {"digitize:units", "1/sr"}};
-  if (Status s = WriteFloatExr(dir / "truth" / "rho_d.exr", t.rho_d, {"R", "G", "B"}, meta);
+  if (Status s = WriteFloatExr(dir / "truth" / "rho_d.exr",
+                               map_of([&](int m) { return of_material.rho_d(m, 0); }),
+                               {"R", "G", "B"}, meta);
       !s.ok())
     return s;
-  if (Status s = WriteFloatExr(dir / "truth" / "rho_s.exr", t.rho_s, {"R", "G", "B"}, meta);
+  if (Status s = WriteFloatExr(dir / "truth" / "rho_s.exr",
+                               map_of([&](int m) { return of_material.rho_s(m, 0); }),
+                               {"R", "G", "B"}, meta);
       !s.ok())
     return s;
   {
     // cz is 1 everywhere (the stored gauge): three channels, which every reader here opens.
-    Grid<Vec3f> lobe(t.lobe.width, t.lobe.height);
-    for (size_t i = 0; i < lobe.size(); ++i) {
-      const auto& c = t.lobe.data[i];
-      lobe.data[i] = Vec3f(c[0], c[1], c[3]);
-    }
+    const Grid<Vec3f> lobe = map_of([&](int m) {
+      const auto& c = of_material.lobe(m, 0);
+      return Vec3f(c[0], c[1], c[3]);
+    });
     const ImageMetadata lobe_meta = {
         {"digitize:frame", "canvas texel grid (row 0 = top)"},
         {"digitize:quantity",

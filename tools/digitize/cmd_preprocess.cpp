@@ -79,6 +79,12 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
                 "WIDTH HEIGHT of a PLY point grid without a 'comment grid' line")
       ->expected(2)
       ->group("Input");
+  c->add_option("--max-scan-samples", args->read.max_samples,
+                "Refuse a scan with more samples than this: a guard against a corrupt header "
+                "(about 14 bytes of memory a sample; a 16384 x 12288 scan needs 2e8)")
+      ->capture_default_str()
+      ->check(CLI::Range(size_t{1}, size_t{1} << 32))
+      ->group("Input");
   AddPreprocessFlags(c, args->options);
   c->callback([args, &exit_code] { exit_code = RunPreprocess(*args); });
 }

@@ -155,7 +155,8 @@ int RunSynth(SynthArgs args) {
   bar.Update("scene", 0.3 * k);
   const synth::Scene scene(painting, args.frame);
   bar.Update("scan", 0.45 * k);
-  const synth::SyntheticScan scan = synth::SimulateScan(scene, args.scan);
+  synth::SyntheticScan scan = synth::SimulateScan(scene, args.scan);
+  const size_t exposures = scan.exposures.size();
   synth::SyntheticPhotoSet photos;  // without pixels: each image is written once rendered
   synth::SyntheticRtiCapture rti;
   if (args.rti) {
@@ -166,6 +167,11 @@ int RunSynth(SynthArgs args) {
       WriteDirectoryAtomically(args.out, output, [&](const std::filesystem::path& dir) {
         bar.Update("writing", 0.7 * k);
         if (Status s = synth::WriteSyntheticScan(dir, painting, scan); !s.ok()) return s;
+        // Written: the photos need its pose only, so its samples and masks (14 bytes a scan
+        // sample) go before the render.
+        scan.exposures = {};
+        scan.canvas_mask_scan = Grid<uint8_t>();
+        scan.hit_scan = Grid<uint8_t>();
         if (args.rti) {
           if (Status s = synth::WriteSyntheticRti(dir / "rti", rti); !s.ok()) return s;
         }
@@ -181,7 +187,7 @@ int RunSynth(SynthArgs args) {
   std::printf(
       "synthetic painting %.0f x %.0f mm, %dx%d texels; scan %dx%d (%zu exposure(s)) -> %s/\n",
       painting.width_mm, painting.height_mm, painting.truth.width(), painting.truth.height(),
-      args.scan.width_px, args.scan.height_px, scan.exposures.size(), args.out.c_str());
+      args.scan.width_px, args.scan.height_px, exposures, args.out.c_str());
   if (args.photos) {
     std::printf("photo set: %s -> %s/photos/\n", photos.Brief().c_str(), args.out.c_str());
   }
@@ -210,7 +216,7 @@ void AddSynthCommand(CLI::App& app, int& exit_code) {
   c->add_option("--height-mm", p.height_mm, "Canvas height (mm)")
       ->capture_default_str()
       ->group("Painting");
-  c->add_option("--resolution", p.resolution_px, "Texels along the longer canvas side (64..8192)")
+  c->add_option("--resolution", p.resolution_px, "Texels along the longer canvas side (64..16384)")
       ->capture_default_str()
       ->each([args](const std::string&) { args->resolution_given = true; })
       ->group("Painting");

@@ -18,7 +18,7 @@ namespace digitize::synth {
 
 struct PaintingOptions {
   double width_mm = 400, height_mm = 300;  // canvas size
-  int resolution_px = 1024;                // texels along the longer side (64 .. 8192)
+  int resolution_px = 1024;                // texels along the longer side (64 .. 16384)
   uint64_t seed = 1;
 
   bool weave = true;

@@ -150,7 +150,9 @@ struct SyntheticPhotoSet {
   std::vector<Grid<uint8_t>> held_out_mask;
   // Ground truth on the PAINTING's texel grid: one-lobe maps (status kConverged; measured-material
   // texels hold the material's diffuse term only, status kDiffuseOnly, and are marked in
-  // `measured_texel`), the material index per texel, and the materials.
+  // `measured_texel`), the material index per texel, and the materials. `truth` is
+  // MaterialTruth(materials) at each texel's material_index; empty for a set rendered into a sink
+  // (its writer makes the truth files from material_index).
   ReflectanceMaps truth;
   Grid<uint8_t> material_index;
   Grid<uint8_t> measured_texel;
@@ -181,6 +183,10 @@ struct GgxPaintingCase {
   std::vector<PaintMaterial> materials;
 };
 GgxPaintingCase MakeGgxPaintingCase(int resolution_px = 96, uint64_t seed = 1);
+
+// The truth of each material, as a texel painted with it holds it: maps of materials.size() x 1
+// texels (texel i = materials[i]).
+ReflectanceMaps MaterialTruth(const std::vector<PaintMaterial>& materials);
 
 // Receives each image as soon as its camera position is rendered (held_out_mask: null for a
 // fitting image, the image's mask for a held-out one; index into fit.photos or held_out.photos).
@@ -215,7 +221,7 @@ Status WriteSyntheticPhotoSet(const std::filesystem::path& dir, const SyntheticP
 // image is written as soon as its camera position is rendered (the same files, byte for byte).
 // This is how `digitize synth --photos` writes, so a tiled set of a 8k x 6k-texel painting
 // (gigapixels in all) needs no more memory than one of its cells. `summary`, when given, gets the
-// set without pixels (cameras, lights, counts, truth).
+// set without pixels or truth maps (cameras, lights, counts, material_index).
 Status RenderSyntheticPhotoSet(const std::filesystem::path& dir, const Scene& scene,
                                const RigidTransform& canvas_from_scan,
                                const PhotoSimOptions& options,
