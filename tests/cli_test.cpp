@@ -100,6 +100,24 @@ TEST_F(CliTest, BadOptionValueNamesTheOption) {
   EXPECT_FALSE(fs::exists(Path("out")));
 }
 
+// The guard against a corrupt header's size is an option: a scan above it is refused (file named,
+// nothing written), one at it is read.
+TEST_F(CliTest, ScansAboveMaxScanSamplesAreRefused) {
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 96 --scan-size 96 96");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  Output refused = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") +
+                          " --max-scan-samples 9215");
+  EXPECT_EQ(refused.exit_code, 1) << refused.text;
+  EXPECT_NE(refused.text.find("scan.exr"), std::string::npos) << refused.text;
+  EXPECT_NE(refused.text.find("9216"), std::string::npos) << refused.text;
+  EXPECT_NE(refused.text.find("9215"), std::string::npos) << refused.text;
+  EXPECT_FALSE(fs::exists(Path("out")));
+  Output read = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") +
+                       " --max-scan-samples 9216");
+  EXPECT_EQ(read.exit_code, 0) << read.text;
+  EXPECT_TRUE(fs::exists(Path("out/height.exr")));
+}
+
 TEST_F(CliTest, SynthThenPreprocessWritesCompleteOutputs) {
   Output synth =
       RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 256 --seed 3");
