@@ -7,7 +7,9 @@
 # build/bin/digitize), TILE (tile side, default 512), LIGHTS (lights per camera position, default
 # 16), ENCODING (photo files, default jpeg), UNTILED_MAX (largest size whose untiled fit is also run
 # and compared, default 2048: it holds every photo whole), WORK (scratch folder, default a new one
-# under /tmp, removed after), CSV (default docs/bench_tiles.csv).
+# under /tmp, removed after), CSV (default docs/bench_tiles.csv), SCAN_SCALE (scan samples per
+# texel along each side, in tenths, default 15: a 1.5 n x 1.125 n scan; the 16384 row used 10, since
+# the generator holds ~14 bytes a scan sample beside the painting).
 # The photos are a tiled set, as a large painting is photographed: a grid of camera positions
 # straight above cells of about 2048 x 2048 texels (1 x 1 up to 2048, 2 x 2 at 4096, 4 x 3 at
 # 8192), each cell's image grown by 10 % of a cell on every side, each under its own LIGHTS lights
@@ -46,6 +48,7 @@ measure() {
 }
 
 untiled_max=${UNTILED_MAX:-2048}
+scan_scale=${SCAN_SCALE:-15}
 compare_cache=${COMPARE_CACHE:-1}
 encoding=${ENCODING:-jpeg}
 echo "size,texels,grid,photos,photo_mpx,stage,seconds,peak_rss_mb,identical" > "$csv"
@@ -67,13 +70,15 @@ for n in "${sizes[@]}"; do
   grid="${cols}x$rows"
   read -r s kb < <(measure "$bin" synth -o "$d/synth" --resolution "$n" --photos --lights "$lights" \
                      --camera-grid "$cols" "$rows" --photo-encoding "$encoding" \
-                     --held-out-lights 0 --scan-size $((n * 3 / 2)) $((n * 9 / 8)))
+                     --held-out-lights 0 --scan-size $((n * scan_scale / 10)) \
+                     $((n * scan_scale * 3 / 40)))
   photos=$((cols * rows * lights))
   mpx=$(grep -oE '[0-9.]+ Mpx' "$WORK/last.log" | head -1 | awk '{print $1}')
   echo "  photo set: $(grep -oE 'photo set: [^;]*;[^;]*' "$WORK/last.log" | head -1)," \
        "$(du -sh "$d/synth/photos/images" | cut -f1) on disk"
   synth_s=$s synth_kb=$kb
-  read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch")
+  read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch" \
+                     --max-scan-samples 4294967296)
   texels=$(oiiotool --info "$d/canvas/height.exr" |
              sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
   row synth "$synth_s" "$synth_kb"  # after preprocess, which tells the canvas's texels
@@ -142,7 +147,11 @@ for n in "${sizes[@]}"; do
       row tiles_merge "$s" "$kb" "$same"
     else
       verified=no
-      "$bin" verify "$d/tiled_$pt.pack.exr" > /dev/null 2>&1 && verified=verified
+      if "$bin" verify "$d/tiled_$pt.pack.exr" > "$WORK/verify.log" 2>&1; then
+        verified=verified
+      else  # the pack is removed with its folder below: say why now
+        echo "  verify failed: $(tail -1 "$WORK/verify.log")" >&2
+      fi
       row "tiles_merge_streamed_$pt" "$s" "$kb" "$verified"
     fi
   done
