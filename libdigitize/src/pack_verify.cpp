@@ -3,6 +3,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "digitize/image_io.h"
 #include "digitize/pack.h"
@@ -16,28 +17,45 @@ using pack_exr::TexelName;
 
 namespace {
 
-// What the box and height checks need of level 0, gathered from one grid or tile by tile.
+// What the box and height checks need of level 0, gathered from one grid (a single-grid pack)
+// or a tile at a time (a tiled one), each texel once.
 struct HeightExtremes {
   float highest = -std::numeric_limits<float>::infinity();  // over texels with a height
   std::vector<float> box_max;                               // per box: its cell's highest height
   std::vector<float> at_peak;                               // per box: the height at (u_max, v_max)
-};
 
-HeightExtremes ExtremesOf(const Pack& p) {
-  HeightExtremes e;
-  for (int y = 0; y < p.height(); ++y)
-    for (int x = 0; x < p.width(); ++x)
-      if (HasHeight(p.field.state(x, y))) e.highest = std::max(e.highest, p.field.height_mm(x, y));
-  for (const ReliefBox& b : p.boxes) {
-    float cell_max = -std::numeric_limits<float>::infinity();
-    for (int y = b.y0; y < b.y0 + b.height; ++y)
-      for (int x = b.x0; x < b.x0 + b.width; ++x)
-        if (HasHeight(p.field.state(x, y))) cell_max = std::max(cell_max, p.field.height_mm(x, y));
-    e.box_max.push_back(cell_max);
-    e.at_peak.push_back(p.field.height_mm(b.u_max, b.v_max));
+  HeightExtremes(const std::vector<ReliefBox>& boxes, int width, int height, int cell_px)
+      : box_max(boxes.size(), -std::numeric_limits<float>::infinity()),
+        at_peak(boxes.size(), std::numeric_limits<float>::quiet_NaN()),
+        cell_px_(cell_px),
+        cells_x_((width + cell_px - 1) / cell_px),
+        box_of_cell_(static_cast<size_t>(cells_x_) * ((height + cell_px - 1) / cell_px), -1) {
+    // Boxes are cells of cell_px (DecodeBoxCells): a texel finds its box through its cell.
+    for (size_t i = 0; i < boxes.size(); ++i)
+      box_of_cell_[Cell(boxes[i].x0, boxes[i].y0)] = static_cast<int>(i);
   }
-  return e;
-}
+
+  // The texels of `field`, whose first texel is (x0, y0) of level 0; `boxes` as constructed.
+  void Add(const std::vector<ReliefBox>& boxes, const HeightField& field, int x0, int y0) {
+    for (int y = 0; y < field.height(); ++y)
+      for (int x = 0; x < field.width(); ++x) {
+        const int X = x0 + x, Y = y0 + y;
+        const float hgt = field.height_mm(x, y);
+        const int box = box_of_cell_[Cell(X, Y)];
+        if (box >= 0 && X == boxes[box].u_max && Y == boxes[box].v_max) at_peak[box] = hgt;
+        if (!HasHeight(field.state(x, y))) continue;
+        highest = std::max(highest, hgt);
+        if (box >= 0) box_max[box] = std::max(box_max[box], hgt);
+      }
+  }
+
+ private:
+  size_t Cell(int x, int y) const {
+    return static_cast<size_t>(y / cell_px_) * cells_x_ + x / cell_px_;
+  }
+  int cell_px_, cells_x_;
+  std::vector<int> box_of_cell_;
+};
 
 // A version 3 pack verified a tile at a time: ReadPack would hold level 0 whole, which a pack
 // larger than one machine's memory (or than PackReadOptions::max_texels) cannot be. Every tile of
@@ -47,17 +65,7 @@ Result<HeightExtremes> VerifyTiles(const fs::path& path, TiledPackReader& reader
                                    std::vector<std::string>& checks) {
   const std::string file = path.string();
   const PackSummary& s = reader.summary();
-  const std::vector<ReliefBox>& boxes = reader.boxes();
-  HeightExtremes e;
-  e.box_max.assign(boxes.size(), -std::numeric_limits<float>::infinity());
-  e.at_peak.assign(boxes.size(), std::numeric_limits<float>::quiet_NaN());
-  // Boxes are cells of cell_px (DecodeBoxCells): a texel finds its box through its cell.
-  const int cells_x = (s.width + s.cell_px - 1) / s.cell_px;
-  const int cells_y = (s.height + s.cell_px - 1) / s.cell_px;
-  std::vector<int> box_of_cell(static_cast<size_t>(cells_x) * cells_y, -1);
-  for (size_t i = 0; i < boxes.size(); ++i)
-    box_of_cell[static_cast<size_t>(boxes[i].y0 / s.cell_px) * cells_x + boxes[i].x0 / s.cell_px] =
-        static_cast<int>(i);
+  HeightExtremes e(reader.boxes(), s.width, s.height, s.cell_px);
   std::array<int64_t, kReflectanceModelCount> models{};
   const int t = s.tile_size;
   int64_t tiles = 0;
@@ -71,30 +79,14 @@ Result<HeightExtremes> VerifyTiles(const fs::path& path, TiledPackReader& reader
         if (Status st = texels.maps.Validate(); !st.ok())
           return Error{file + ": tile " + std::to_string(tx) + ", " + std::to_string(ty) + ": " +
                        st.message()};
-        for (int y = 0; y < texels.field.height(); ++y)
-          for (int x = 0; x < texels.field.width(); ++x) {
-            const int X = tile->x0 + x, Y = tile->y0 + y;
-            ++models[static_cast<int>(texels.maps.model(x, y))];
-            const float hgt = texels.field.height_mm(x, y);
-            const int box =
-                box_of_cell[static_cast<size_t>(Y / s.cell_px) * cells_x + X / s.cell_px];
-            if (box >= 0 && X == boxes[box].u_max && Y == boxes[box].v_max) e.at_peak[box] = hgt;
-            if (!HasHeight(texels.field.state(x, y))) continue;
-            e.highest = std::max(e.highest, hgt);
-            if (box >= 0) e.box_max[box] = std::max(e.box_max[box], hgt);
-          }
+        const auto counts = pack_exr::CountModels(texels.maps);
+        for (int m = 0; m < kReflectanceModelCount; ++m) models[m] += counts[m];
+        e.Add(reader.boxes(), texels.field, tile->x0, tile->y0);
       }
-  if (models != s.texels_by_model) {
-    auto text = [](const std::array<int64_t, kReflectanceModelCount>& counts) {
-      std::string out;
-      for (int k = 0; k < kReflectanceModelCount; ++k)
-        out += std::string(k > 0 ? ", " : "") + std::to_string(counts[k]) + " " +
-               ToString(static_cast<ReflectanceModel>(k));
-      return out;
-    };
-    return Error{file + ": the texels are " + text(models) +
-                 ", the header's digitize:models says " + text(s.texels_by_model)};
-  }
+  if (models != s.texels_by_model)
+    return Error{file + ": the texels are " + pack_exr::ModelCountsText(models) +
+                 ", the header's digitize:models says " +
+                 pack_exr::ModelCountsText(s.texels_by_model)};
   checks.push_back("tiles: " + std::to_string(tiles) + " tiles of " + std::to_string(t) +
                    " texels over " + std::to_string(s.levels.size()) +
                    " levels, each matching its SHA-1, every value checked, read a tile at a time");
@@ -114,19 +106,20 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   v.checks.push_back("container: OpenEXR, " + std::to_string(tiled ? 4 : 3) + " parts, version " +
                      std::to_string(s.version) + ", " + ToString(s.encoding) + " encoding");
   std::vector<ReliefBox> boxes;
-  HeightExtremes extremes;
+  std::optional<HeightExtremes> extremes;
   if (tiled) {
     auto reader = TiledPackReader::Open(path, options);
     if (!reader.ok()) return reader.error();
     auto e = VerifyTiles(path, **reader, v.checks);
     if (!e.ok()) return e.error();
-    extremes = std::move(e).value();
     boxes = (*reader)->boxes();
+    extremes = std::move(e).value();
   } else {
     auto pack = ReadPack(path, options);
     if (!pack.ok()) return pack.error();
-    extremes = ExtremesOf(*pack);
     boxes = pack->boxes;
+    extremes.emplace(boxes, s.width, s.height, s.cell_px);
+    extremes->Add(boxes, pack->field, 0, 0);
   }
   v.checks.push_back(
       "geometry: pitch " + FormatNumber(s.pitch_mm, kRoundTripDigits) + " mm, " +
@@ -157,12 +150,13 @@ Result<PackVerification> VerifyPack(const fs::path& path, const PackReadOptions&
   const double rel =
       std::ldexp(1.0, -(s.encoding == PackEncoding::kQuantised ? s.quantisation.height_bits : 10));
   auto tol = [&](double hgt) { return rel * std::abs(hgt) + 1e-6; };
-  if (std::isfinite(extremes.highest) && extremes.highest > s.max_height_mm + tol(s.max_height_mm))
-    return Error{file + ": a height of " + FormatNumber(extremes.highest) +
+  if (std::isfinite(extremes->highest) &&
+      extremes->highest > s.max_height_mm + tol(s.max_height_mm))
+    return Error{file + ": a height of " + FormatNumber(extremes->highest) +
                  " mm exceeds max_height_mm " + FormatNumber(s.max_height_mm)};
   for (size_t i = 0; i < boxes.size(); ++i) {
     const ReliefBox& b = boxes[i];
-    const float cell_max = extremes.box_max[i], at_peak = extremes.at_peak[i];
+    const float cell_max = extremes->box_max[i], at_peak = extremes->at_peak[i];
     if (!std::isfinite(cell_max) || std::abs(cell_max - b.h_max_mm) > tol(b.h_max_mm) ||
         !(std::abs(at_peak - b.h_max_mm) <= tol(b.h_max_mm)))
       return Error{file + ": box " + std::to_string(i) + " (cell at texel " +
