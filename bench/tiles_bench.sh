@@ -9,7 +9,8 @@
 # and compared, default 2048: it holds every photo whole), WORK (scratch folder, default a new one
 # under /tmp, removed after), CSV (default docs/bench_tiles.csv), SCAN_SCALE (scan samples per
 # texel along each side, in tenths, default 15: a 1.5 n x 1.125 n scan; the 16384 row used 10, since
-# the generator holds ~14 bytes a scan sample beside the painting).
+# the generator holds ~14 bytes a scan sample beside the painting), PREPROCESS_TILE (preprocess in
+# tiles of this side, `--tile-texels`; default 0: whole).
 # The photos are a tiled set, as a large painting is photographed: a grid of camera positions
 # straight above cells of about 2048 x 2048 texels (1 x 1 up to 2048, 2 x 2 at 4096, 4 x 3 at
 # 8192), each cell's image grown by 10 % of a cell on every side, each under its own LIGHTS lights
@@ -77,8 +78,10 @@ for n in "${sizes[@]}"; do
   echo "  photo set: $(grep -oE 'photo set: [^;]*;[^;]*' "$WORK/last.log" | head -1)," \
        "$(du -sh "$d/synth/photos/images" | cut -f1) on disk"
   synth_s=$s synth_kb=$kb
+  preprocess_tile=()
+  [ "${PREPROCESS_TILE:-0}" -gt 0 ] && preprocess_tile=(--tile-texels "$PREPROCESS_TILE")
   read -r s kb < <(measure "$bin" preprocess "$d/synth/scan.exr" -o "$d/canvas" --pitch-mm "$pitch" \
-                     --max-scan-samples 4294967296)
+                     --max-scan-samples 4294967296 "${preprocess_tile[@]}")
   texels=$(oiiotool --info "$d/canvas/height.exr" |
              sed -E 's/.*: *([0-9]+) x +([0-9]+),.*/\1 \2/' | awk '{print $1 * $2}')
   row synth "$synth_s" "$synth_kb"  # after preprocess, which tells the canvas's texels

@@ -40,10 +40,12 @@ set(DIGITIZE_RELIEF_SOURCES
   sphere_calibration.cpp  # OpenCV HoughCircles: light directions from a reflective sphere
 )
 
-set(DIGITIZE_PREPROCESS_HEADERS preprocess.h)
+set(DIGITIZE_PREPROCESS_HEADERS preprocess.h preprocess_tiled.h)
 set(DIGITIZE_PREPROCESS_SOURCES
   preprocess.cpp
   preprocess_patches.cpp  # PreprocessPatches, the patch list and the registration report
+  preprocess_tiled.cpp    # one scan too large to hold: the canvas strided, then tiles
+                          # (private step_text.h: the step lines of both)
 )
 
 set(DIGITIZE_PHOTOS_HEADERS photo_set.h photo_tile_cache.h rti_basis.h rti_export.h)

@@ -118,6 +118,40 @@ TEST_F(CliTest, ScansAboveMaxScanSamplesAreRefused) {
   EXPECT_TRUE(fs::exists(Path("out/height.exr")));
 }
 
+// --tile-texels: the same canvas folder, made a tile at a time (preprocess_tiled_test.cpp
+// compares it with the whole), nothing of its own left in it; what it cannot read is refused
+// before anything is written.
+TEST_F(CliTest, PreprocessInTilesWritesTheCanvasFolder) {
+  Output synth = RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 192");
+  ASSERT_EQ(synth.exit_code, 0) << synth.text;
+  Output tiled = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("c") +
+                        " --tile-texels 64 --canvas-stride 2");
+  ASSERT_EQ(tiled.exit_code, 0) << tiled.text;
+  EXPECT_NE(tiled.text.find("one scan sample in 2 x 2"), std::string::npos) << tiled.text;
+  EXPECT_NE(tiled.text.find("tiles of 64"), std::string::npos) << tiled.text;
+  auto in = OIIO::ImageInput::open(Path("c/height.exr"));
+  ASSERT_TRUE(in);
+  EXPECT_GT(in->spec().width, 128) << "more than two tiles across";
+  const auto boxes = nlohmann::json::parse(std::ifstream(Path("c/boxes.json")));
+  EXPECT_FALSE(boxes.at("boxes").empty()) << "the painting has impasto";
+  EXPECT_EQ(boxes.at("grid_size_texels").at(0).get<int>(), in->spec().width);
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(Path("c"))) names.push_back(e.path().filename());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{".digitize-output", "boxes.json",
+                                             "canvas_mask_scan.png", "height.exr", "mask.png",
+                                             "normals.exr", "report.json", "transform.json"}));
+  Output masked = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("m") +
+                         " --tile-texels 64 --mask " + Path("c/mask.png"));
+  EXPECT_EQ(masked.exit_code, 1) << masked.text;
+  EXPECT_NE(masked.text.find("one XYZ scan"), std::string::npos) << masked.text;
+  EXPECT_FALSE(fs::exists(Path("m")));
+  Output small =
+      RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("m") + " --tile-texels 8");
+  EXPECT_NE(small.exit_code, 0) << small.text;
+  EXPECT_FALSE(fs::exists(Path("m")));
+}
+
 TEST_F(CliTest, SynthThenPreprocessWritesCompleteOutputs) {
   Output synth =
       RunCli("synth --out " + Path("s") + " --resolution 200 --scan-size 256 256 --seed 3");

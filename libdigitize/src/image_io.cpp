@@ -649,6 +649,71 @@ Status ReadImageInBands(const fs::path& path, size_t max_pixels, int band_rows,
 
 namespace digitize {
 
+struct BandImageWriter::Impl {
+  fs::path path;
+  std::unique_ptr<OIIO::ImageOutput> out;
+  OIIO::TypeDesc type;
+  int width = 0, height = 0, channels = 0, next_row = 0;
+};
+
+BandImageWriter::BandImageWriter(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+BandImageWriter::~BandImageWriter() = default;
+
+Result<std::unique_ptr<BandImageWriter>> BandImageWriter::Open(
+    const fs::path& path, int width, int height, const std::vector<std::string>& channels,
+    const ImageMetadata& metadata) {
+  if (width <= 0 || height <= 0)
+    return Error{path.string() + ": cannot write an empty image (" + std::to_string(width) + "x" +
+                 std::to_string(height) + ")"};
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  impl->width = width;
+  impl->height = height;
+  const bool exr = !channels.empty();
+  OIIO::ImageSpec spec;
+  if (exr) {
+    spec = ExrSpec(width, height, channels, metadata);
+    impl->type = OIIO::TypeDesc::FLOAT;
+    impl->channels = static_cast<int>(channels.size());
+  } else {
+    spec = OIIO::ImageSpec(width, height, 1, OIIO::TypeDesc::UINT8);
+    impl->type = OIIO::TypeDesc::UINT8;
+    impl->channels = 1;
+  }
+  impl->out = OIIO::ImageOutput::create(exr ? "openexr" : "png");
+  if (!impl->out) return Error{path.string() + ": no image writer: " + OneLine(OIIO::geterror())};
+  if (!impl->out->open(path.string(), spec))
+    return Error{path.string() + ": cannot open for writing: " + OneLine(impl->out->geterror())};
+  return std::unique_ptr<BandImageWriter>(new BandImageWriter(std::move(impl)));
+}
+
+Status BandImageWriter::Write(const void* pixels, int rows) {
+  Impl& m = *impl_;
+  if (!m.out) return Error{m.path.string() + ": written after it was closed"};
+  if (rows <= 0 || rows > m.height - m.next_row)
+    return Error{m.path.string() + ": " + std::to_string(rows) + " rows at row " +
+                 std::to_string(m.next_row) + " of " + std::to_string(m.height)};
+  if (!m.out->write_scanlines(m.next_row, m.next_row + rows, 0, m.type, pixels))
+    return WithDiskFull(Error{m.path.string() + ": write failed: " + OneLine(m.out->geterror())},
+                        m.path);
+  m.next_row += rows;
+  return Status::Ok();
+}
+
+Status BandImageWriter::Close() {
+  Impl& m = *impl_;
+  if (!m.out) return Status::Ok();
+  const bool complete = m.next_row == m.height;
+  const bool closed = m.out->close();
+  const std::string error = closed ? "" : OneLine(m.out->geterror());
+  m.out.reset();
+  if (!closed) return WithDiskFull(Error{m.path.string() + ": write failed: " + error}, m.path);
+  if (!complete)
+    return Error{m.path.string() + ": closed after " + std::to_string(m.next_row) + " of " +
+                 std::to_string(m.height) + " rows"};
+  return Status::Ok();
+}
+
 struct ImageRegionReader::Impl {
   OIIO::ImageCache* cache = nullptr;
   std::atomic<size_t> peak{0};

@@ -137,6 +137,22 @@ Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& optio
   FolderOutput output{"preprocess", "canvas", {options.scans.begin(), options.scans.end()}};
   if (!options.read.mask.empty()) output.inputs.emplace_back(options.read.mask);
   if (Status s = CheckFolderOutput(options.out, output); !s.ok()) return Error{s.message()};
+  if (options.tiled) {
+    if (options.scans.size() != 1 || !options.read.mask.empty())
+      return Error{
+          "a tiled preprocess takes one XYZ scan, without --mask (exposures are merged "
+          "and masks applied whole)"};
+    std::optional<PreprocessResult> tiled;
+    Status written = WriteDirectoryAtomically(options.out, output, [&](const fs::path& dir) {
+      auto r = PreprocessScanTiled(options.scans.front(), options.preprocess, *options.tiled, dir,
+                                   options.scans, progress);
+      if (!r.ok()) return Status(r.error());
+      tiled = std::move(r).value();
+      return Status::Ok();
+    });
+    if (!written.ok()) return Error{written.message()};
+    return std::move(*tiled);
+  }
   Result<std::vector<Scan>> exposures = ReadScans(options.scans, options.read);
   if (!exposures.ok()) return exposures.error();
   Result<PreprocessResult> result =

@@ -10,21 +10,15 @@
 #include "digitize/image_io.h"
 #include "json_fields.h"
 #include "options_json.h"
+#include "step_text.h"
 
 namespace digitize {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using step_text::Clock;
 
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-std::string Format(const char* fmt, auto... args) {
-  char buffer[512];
-  std::snprintf(buffer, sizeof(buffer), fmt, args...);
-  return buffer;
-}
+using step_text::Format;
+using step_text::SecondsSince;
 
 constexpr double kSteps = 6;  // progress: each step counts as one sixth
 
@@ -51,15 +45,7 @@ void FinishPreprocess(PreprocessResult& result, const PreprocessOptions& options
   };
   auto t0 = Clock::now();
   ReportProgress(progress, "relief", 4.0 / kSteps);
-  ReliefOptions relief_options = options.relief;
-  if (options.noise_margin_from_scan) {
-    // The max of N Gaussian samples reaches ~5 sigma for N ~ 10^6: below 8 sigma, the "relief" of
-    // a flat canvas is its noise. The margin is capped so it never swallows delta0 itself.
-    const double sigma = c.noise_sigma_mm;
-    relief_options.min_relief_mm = std::max(relief_options.min_relief_mm, 8.0 * sigma);
-    relief_options.noise_margin_mm = 2.0 * sigma;
-  }
-  result.relief = ClassifyRelief(result.field, relief_options);
+  result.relief = ClassifyRelief(result.field, PreprocessReliefOptions(options, c.noise_sigma_mm));
   const ReliefResult& r = result.relief;
   step("relief", t0,
        Format("relief: max height %.3f mm, delta0 %.3f mm; %zu texels above in %zu component(s) "
@@ -81,6 +67,17 @@ void FinishPreprocess(PreprocessResult& result, const PreprocessOptions& options
 }
 
 }  // namespace
+
+ReliefOptions PreprocessReliefOptions(const PreprocessOptions& options, double noise_sigma_mm) {
+  ReliefOptions relief = options.relief;
+  if (options.noise_margin_from_scan) {
+    // The max of N Gaussian samples reaches ~5 sigma for N ~ 10^6: below 8 sigma, the "relief" of
+    // a flat canvas is its noise. The margin is capped so it never swallows delta0 itself.
+    relief.min_relief_mm = std::max(relief.min_relief_mm, 8.0 * noise_sigma_mm);
+    relief.noise_margin_mm = 2.0 * noise_sigma_mm;
+  }
+  return relief;
+}
 
 Status PreprocessOptions::Validate() const {
   for (const auto& [name, status] :
@@ -296,7 +293,7 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
       {"warnings", c.warnings},
       {"resample",
        {{"pitch_mm", result.field.pitch_mm},
-        {"size_texels", {result.field.width(), result.field.height()}},
+        {"size_texels", {result.field.full_width(), result.field.full_height()}},
         {"measured", result.resample.measured},
         {"filled", result.resample.filled},
         {"unfilled", result.resample.unfilled},
@@ -315,6 +312,15 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
         {"components_removed", result.relief.components_removed}}},
       {"options", ToJson(options)},
   };
+  if (result.tiled) {
+    const PreprocessResult::Tiled& t = *result.tiled;
+    report["tiled"] = {{"tile_texels", t.tile_texels},
+                       {"halo_texels", t.halo_texels},
+                       {"canvas_stride", t.canvas_stride},
+                       {"tiles", t.tiles},
+                       {"tiles_without_samples", t.tiles_without_samples},
+                       {"scan_spacing_mm", t.scan_spacing_mm}};
+  }
   return report.dump(2) + "\n";
 }
 
@@ -363,7 +369,13 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   Grid<uint8_t> scan_mask = result.canvas.mask_scan;
   for (uint8_t& v : scan_mask.data) v = v ? 255 : 0;
   if (Status s = WritePng8(dir / "canvas_mask_scan.png", scan_mask); !s.ok()) return s;
+  return WritePreprocessJson(dir, result, options, inputs);
+}
 
+Status WritePreprocessJson(const std::filesystem::path& dir, const PreprocessResult& result,
+                           const PreprocessOptions& options,
+                           const std::vector<std::string>& inputs) {
+  const HeightField& f = result.field;
   using nlohmann::json;
   json boxes = json::array();
   for (const ReliefBox& b : result.relief.boxes)
@@ -377,7 +389,7 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   json boxes_doc = {{"format", "digitize.boxes"},
                     {"version", 1},
                     {"units", "texels; heights in mm"},
-                    {"grid_size_texels", {f.width(), f.height()}},
+                    {"grid_size_texels", {f.full_width(), f.full_height()}},
                     {"pitch_mm", f.pitch_mm},
                     {"cell_px", result.relief.cell_px},
                     {"delta0_mm", result.relief.delta0_mm},
@@ -390,7 +402,7 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
       {"version", 1},
       {"canvas_from_scan", ToJson(result.canvas.canvas_from_scan)},
       {"pitch_mm", f.pitch_mm},
-      {"size_texels", {f.width(), f.height()}},
+      {"size_texels", {f.full_width(), f.full_height()}},
       {"extent_mm", {result.canvas.extent_mm.x(), result.canvas.extent_mm.y()}},
       {"texel_centre", "X = (x + 0.5) * pitch_mm, Y = (rows - y - 0.5) * pitch_mm, Z = height_mm"}};
   if (f.frame.any()) {

@@ -91,12 +91,15 @@ ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& optio
       },
       [](float a, float b) { return std::max(a, b); });
   if (max_h == kNone) return result;  // no texel with height
-  result.max_height_mm = max_h;
+  // A window of a larger canvas (a tile with its halo) takes the canvas's H: delta0, and so which
+  // texels are relief, must not depend on the tile.
+  const float canvas_h = field.window.full_width > 0 ? field.window.full_max_height_mm : max_h;
+  result.max_height_mm = canvas_h;
   // Flat canvas: a highest point within the relief floor is noise or rounding, not relief; boxes
   // built on it would make the viewer relief-map the whole canvas for nothing.
-  if (!(max_h > options.min_relief_mm)) return result;
+  if (!(canvas_h > options.min_relief_mm)) return result;
 
-  result.delta0_mm = options.delta0_fraction * max_h;
+  result.delta0_mm = options.delta0_fraction * canvas_h;
   // The margin never takes more than half of delta0: it widens Mv near the threshold, it must not
   // turn the whole canvas into relief when the noise is large against the relief.
   const double threshold =

@@ -266,7 +266,8 @@ Result<GridPlan> PlanGrid(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, siz
   if (count < 3)
     return Error{src + ": the canvas mask holds " + std::to_string(count) +
                  " valid samples, too few to resample"};
-  double spacing = MedianSpacing(xyz, mask, 1, 0, count);
+  double spacing = options.scan_spacing_mm;
+  if (!(spacing > 0)) spacing = MedianSpacing(xyz, mask, 1, 0, count);
   if (!(spacing > 0)) spacing = MedianSpacing(xyz, mask, 0, 1, count);
   const double pitch = options.pitch_mm > 0 ? options.pitch_mm : spacing;
   if (!(pitch > 0) || !std::isfinite(pitch))
@@ -413,14 +414,12 @@ Counts RasteriseBands(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, const T
   const int w = plan.w, h = plan.h, bands = lists.bands;
   const bool have_map = predict.ok;
   const float edge_limit2 = plan.edge_limit2;
-  const double pitch = plan.pitch;
   const std::vector<std::vector<uint32_t>>& band_chunks = lists.band_chunks;
   const std::vector<int>& first_band = lists.first_band;
-  const float pitch2 = static_cast<float>(pitch * pitch);
-  auto dist2 = [pitch2](const TexelPoint& p, const TexelPoint& q) {
-    const float dx = p.x - q.x, dy = p.y - q.y, dh = p.h - q.h;
-    return (dx * dx + dy * dy) * pitch2 + dh * dh;
-  };
+  // Edge lengths from the scan's own samples (a rigid transform keeps them): the triangles chosen
+  // do not depend on the float rounding of the texel transform, so a tile of the canvas
+  // (preprocess_tiled.h), whose transform is the whole's moved, draws the same ones.
+  auto dist2 = [](const Vec3f& p, const Vec3f& q) { return (p - q).squaredNorm(); };
   return tbb::parallel_reduce(
       tbb::blocked_range<int>(0, bands, 1), Counts{},
       [&](const tbb::blocked_range<int>& br, Counts cnt) {
@@ -440,6 +439,8 @@ Counts RasteriseBands(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, const T
             for (int x = x0; x < x1; ++x) {
               const TexelPoint &A = r0[x - x0], &B = r0[x - x0 + 1], &C = r1[x - x0],
                                &D = r1[x - x0 + 1];
+              const Vec3f *pa = xyz.Row(y) + x, *pc = xyz.Row(y + 1) + x;
+              const Vec3f &PA = pa[0], &PB = pa[1], &PC = pc[0], &PD = pc[1];
               const int va = A.ok(), vb = B.ok(), vc = C.ok(), vd = D.ok();
               const int nvalid = va + vb + vc + vd;
               const int k = x - x0;
@@ -453,20 +454,20 @@ Counts RasteriseBands(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask, const T
               }
               uint8_t cand = 0;
               if (nvalid == 4)
-                cand = dist2(A, D) <= dist2(B, C) ? (kABD | kADC) : (kABC | kBDC);
+                cand = dist2(PA, PD) <= dist2(PB, PC) ? (kABD | kADC) : (kABC | kBDC);
               else
                 cand = !va ? kBDC : !vb ? kADC : !vc ? kABD : kABC;
-              auto short_edge = [&](const TexelPoint& p, const TexelPoint& q) {
+              auto short_edge = [&](const Vec3f& p, const Vec3f& q) {
                 return dist2(p, q) <= edge_limit2;
               };
               uint8_t keep = 0;
-              if ((cand & kABD) && short_edge(A, B) && short_edge(B, D) && short_edge(A, D))
+              if ((cand & kABD) && short_edge(PA, PB) && short_edge(PB, PD) && short_edge(PA, PD))
                 keep |= kABD;
-              if ((cand & kADC) && short_edge(A, D) && short_edge(D, C) && short_edge(A, C))
+              if ((cand & kADC) && short_edge(PA, PD) && short_edge(PD, PC) && short_edge(PA, PC))
                 keep |= kADC;
-              if ((cand & kABC) && short_edge(A, B) && short_edge(B, C) && short_edge(A, C))
+              if ((cand & kABC) && short_edge(PA, PB) && short_edge(PB, PC) && short_edge(PA, PC))
                 keep |= kABC;
-              if ((cand & kBDC) && short_edge(B, D) && short_edge(D, C) && short_edge(B, C))
+              if ((cand & kBDC) && short_edge(PB, PD) && short_edge(PD, PC) && short_edge(PB, PC))
                 keep |= kBDC;
               if (count_here) {
                 const int ncand = kBits[cand], nkeep = kBits[keep];
@@ -525,6 +526,9 @@ Status ResampleOptions::Validate() const {
     return fail("max_edge_factor must be > 0, got " + std::to_string(max_edge_factor));
   if (!(max_hole_area_mm2 >= 0) || !std::isfinite(max_hole_area_mm2))
     return fail("max_hole_area_mm2 must be >= 0, got " + std::to_string(max_hole_area_mm2));
+  if (!(scan_spacing_mm >= 0) || !std::isfinite(scan_spacing_mm))
+    return fail("scan_spacing_mm must be >= 0 (0 = measured), got " +
+                std::to_string(scan_spacing_mm));
   if (max_texels_per_side < 1)
     return fail("max_texels_per_side must be >= 1, got " + std::to_string(max_texels_per_side));
   return Status::Ok();
@@ -624,6 +628,13 @@ Result<HeightField> Resample(const Scan& scan, const CanvasResult& canvas,
 }
 
 }  // namespace
+
+double MedianScanSpacing(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask) {
+  size_t count = 0;
+  for (size_t i = 0; i < xyz.data.size(); ++i) count += mask.data[i] && Usable(xyz.data[i]);
+  const double spacing = MedianSpacing(xyz, mask, 1, 0, count);
+  return spacing > 0 ? spacing : MedianSpacing(xyz, mask, 0, 1, count);
+}
 
 Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
                                          const ResampleOptions& options, ResampleStats* stats) {

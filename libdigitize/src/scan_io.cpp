@@ -62,6 +62,17 @@ int FindChannel(const std::vector<std::string>& names, const std::string& axis) 
   return -1;
 }
 
+}  // namespace
+
+std::array<int, 3> XyzChannels(const std::vector<std::string>& names) {
+  std::array<int, 3> channel = {FindChannel(names, "X"), FindChannel(names, "Y"),
+                                FindChannel(names, "Z")};
+  if (std::find(channel.begin(), channel.end(), -1) != channel.end()) channel = {0, 1, 2};
+  return channel;
+}
+
+namespace {
+
 // Read a band at a time into the scan's grid: the file's float copy would be as large as the
 // scan (12 bytes a sample: 1.4 GB for the scan of an 8192-texel canvas).
 Result<Scan> ReadXyzImageScan(const fs::path& path, const ImageHeader& header, size_t max_samples) {
@@ -76,9 +87,7 @@ Result<Scan> ReadXyzImageScan(const fs::path& path, const ImageHeader& header, s
                          "-bit integer image; an XYZ scan must be float (EXR or TIFF, mm)"};
           // OpenEXR stores channels sorted by name and OpenImageIO may reorder them: map by name
           // when the file names its axes, else take the stored order (R, G, B = X, Y, Z).
-          channel = {FindChannel(band.channel_names, "X"), FindChannel(band.channel_names, "Y"),
-                     FindChannel(band.channel_names, "Z")};
-          if (std::find(channel.begin(), channel.end(), -1) != channel.end()) channel = {0, 1, 2};
+          channel = XyzChannels(band.channel_names);
           // Allocated once the reader has checked the size against max_samples.
           scan.xyz_mm = UnfilledGrid(header.width, header.height);
         }

@@ -17,6 +17,8 @@ struct PreprocessArgs {
   std::string mask;
   std::vector<int> grid;
   PreprocessOptions options;
+  TiledPreprocessOptions tiled;
+  int tile_texels = 0;
 };
 
 int RunPreprocess(const PreprocessArgs& args) {
@@ -28,6 +30,10 @@ int RunPreprocess(const PreprocessArgs& args) {
   o.patches = args.patches;
   o.read = ScanReadOptionsOf(args.read, args.mask, args.grid);
   o.preprocess = args.options;
+  if (args.tile_texels > 0) {
+    o.tiled = args.tiled;
+    o.tiled->tile_texels = args.tile_texels;
+  }
   o.out = args.out;
   ProgressBar bar("preprocess");
   Result<PreprocessResult> result = PreprocessToFolder(o, bar.Callback());
@@ -81,10 +87,26 @@ void AddPreprocessCommand(CLI::App& app, int& exit_code) {
       ->group("Input");
   c->add_option("--max-scan-samples", args->read.max_samples,
                 "Refuse a scan with more samples than this: a guard against a corrupt header "
-                "(about 14 bytes of memory a sample; a 16384 x 12288 scan needs 2e8)")
+                "(about 14 bytes of memory a sample; a 16384 x 12288 scan needs 2e8; "
+                "--tile-texels reads a scan a part at a time instead)")
       ->capture_default_str()
       ->check(CLI::Range(size_t{1}, size_t{1} << 32))
       ->group("Input");
+  c->add_option("--tile-texels", args->tile_texels,
+                "Preprocess in tiles of N texels a side (and a halo) in bounded memory, for a "
+                "scan too large to hold: one 3-channel float XYZ EXR/TIFF; 0 = whole (default)")
+      ->check(CLI::Range(0, 16384))
+      ->group("Large scans");
+  c->add_option("--tile-halo", args->tiled.halo_texels,
+                "Texels around each tile it also resamples (holes and relief specks that cross "
+                "its edge); 0 = from the hole and speck areas")
+      ->check(CLI::Range(0, 4096))
+      ->group("Large scans");
+  c->add_option("--canvas-stride", args->tiled.canvas_stride,
+                "With --tile-texels: the canvas (plane, outline, frame) is found on every N-th "
+                "scan sample; 0 = so that it reads at most 2^24 samples, 1 = every sample")
+      ->check(CLI::Range(0, 64))
+      ->group("Large scans");
   AddPreprocessFlags(c, args->options);
   c->callback([args, &exit_code] { exit_code = RunPreprocess(*args); });
 }

@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "digitize/core.h"
 
@@ -152,6 +153,30 @@ struct CodeImage {
   std::vector<uint16_t> codes16;  // interleaved, max_code 65535
 };
 Status ReadImageCodes(const std::filesystem::path& path, size_t max_pixels, CodeImage& into);
+
+// An image written a band of rows at a time, top to bottom, for maps too large to hold whole
+// (a tiled preprocess's height, normals and mask): float EXR as WriteFloatExr (channels as
+// named) or 8-bit single-channel PNG (no channel names). Written in place, not renamed: for
+// files inside a folder that is itself written atomically (WriteDirectoryAtomically). Errors
+// name the file; Close() checks the file holds every row.
+class BandImageWriter {
+ public:
+  static Result<std::unique_ptr<BandImageWriter>> Open(const std::filesystem::path& path, int width,
+                                                       int height,
+                                                       const std::vector<std::string>& channels,
+                                                       const ImageMetadata& metadata = {});
+  ~BandImageWriter();
+  BandImageWriter(const BandImageWriter&) = delete;
+  BandImageWriter& operator=(const BandImageWriter&) = delete;
+  // The next `rows` rows: float (EXR, channels interleaved) or uint8_t (PNG).
+  Status Write(const void* pixels, int rows);
+  Status Close();
+
+ private:
+  struct Impl;
+  explicit BandImageWriter(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
 
 // The image a band of rows at a time, in order: `consume(band, y0)` gets rows [y0, y0 +
 // band.height) as ReadImage would give them (band.width and the header fields are the file's).

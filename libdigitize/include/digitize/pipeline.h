@@ -14,6 +14,7 @@
 #include "digitize/photo_residuals.h"
 #include "digitize/photo_set.h"
 #include "digitize/preprocess.h"
+#include "digitize/preprocess_tiled.h"
 #include "digitize/reflectance_fit.h"
 #include "digitize/rti_canvas.h"
 #include "digitize/scan_io.h"
@@ -65,6 +66,9 @@ struct PreprocessFolderOptions {
   PatchRegistrationOptions registration;
   ScanReadOptions read;  // mask and PLY grid included
   PreprocessOptions preprocess;
+  // Set: one XYZ scan preprocessed in tiles in bounded memory (preprocess_tiled.h), for scans
+  // too large to hold; not with exposures, patches or a mask.
+  std::optional<TiledPreprocessOptions> tiled;
   std::string out;  // the canvas folder
 };
 

@@ -31,6 +31,10 @@ struct PreprocessOptions {
   Status Validate() const;             // validates every part, message says which option
 };
 
+// The relief options the preprocess classifies with: options.relief, with the floor and the
+// noise margin from the scan's noise when options.noise_margin_from_scan.
+ReliefOptions PreprocessReliefOptions(const PreprocessOptions& options, double noise_sigma_mm);
+
 struct StepReport {
   std::string name;    // "merge", "sanitize", "canvas", "resample", "relief", "normals"
   double seconds = 0;  // wall time
@@ -50,6 +54,15 @@ struct PreprocessResult {
   // PreprocessPatches only: the registration (per patch, per overlap). canvas.canvas_from_scan
   // is then canvas_from_RIG (the frame of the patch list's poses).
   std::optional<PatchRegistrationResult> registration;
+  // PreprocessScanTiled only (preprocess_tiled.h): how the canvas was cut. Its sanitize counts
+  // are the canvas pass's (every canvas_stride-th sample), its hole, triangle and component
+  // counts summed over the tiles' windows (a hole two windows hold counts twice); texel states,
+  // boxes and texels above are the canvas's.
+  struct Tiled {
+    int tile_texels = 0, halo_texels = 0, canvas_stride = 0, tiles = 0, tiles_without_samples = 0;
+    double scan_spacing_mm = 0;
+  };
+  std::optional<Tiled> tiled;
 };
 
 // Errors: invalid options, exposures that cannot be merged, no canvas found (messages name the
@@ -92,6 +105,13 @@ std::string PreprocessReportJson(const PreprocessResult& result, const Preproces
 Status WritePreprocessOutputs(const std::filesystem::path& dir, const PreprocessResult& result,
                               const PreprocessOptions& options,
                               const std::vector<std::string>& inputs);
+
+// The JSON files of WritePreprocessOutputs alone (boxes.json, transform.json, report.json and
+// registration.json for patches), for a result whose maps were written as they were made
+// (preprocess_tiled.h: its field holds no grids, field.window says the canvas's size).
+Status WritePreprocessJson(const std::filesystem::path& dir, const PreprocessResult& result,
+                           const PreprocessOptions& options,
+                           const std::vector<std::string>& inputs);
 
 // What later stages need from a preprocess output folder (WritePreprocessOutputs): the height
 // field (height.exr + mask.png states), the normals and canvas_from_scan (transform.json).

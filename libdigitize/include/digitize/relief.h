@@ -38,7 +38,9 @@ struct ReliefResult {
   size_t texels_above = 0;  // texels in Mv after speck removal
 };
 
-// Only texels with HasHeight() take part. Returns no boxes when nothing rises above delta0
+// Only texels with HasHeight() take part. A window of a larger canvas (field.window.full_width
+// > 0: a tile and its halo) takes H from field.window.full_max_height_mm, so delta0 is the
+// canvas's, not the tile's. Returns no boxes when nothing rises above delta0
 // (a flat canvas: max height <= min_relief_mm, or all relief in specks); never fails on a valid
 // HeightField.
 ReliefResult ClassifyRelief(const HeightField& field, const ReliefOptions& options);

@@ -19,6 +19,10 @@ struct ResampleOptions {
   double max_hole_area_mm2 = 4.0;   // holes up to this area are filled and reported; larger stay
                                     // kUnfilled
   int max_texels_per_side = 16384;  // refuse absurd grids (pitch too small for the canvas)
+  // The scan's median sample spacing (mm), which sets the edge limit when it is coarser than the
+  // pitch; 0 = measured on the scan given. A tile of a larger scan gives the whole scan's, so its
+  // triangles are the whole scan's.
+  double scan_spacing_mm = 0;
   bool find_holes = true;  // false: texels no triangle covered are kOutside, no hole is sought
                            // or filled (for callers that read the measured texels only)
   Status Validate() const;
@@ -29,6 +33,10 @@ struct ResampleStats {
   size_t holes_filled = 0, holes_unfilled = 0;  // connected hole regions
   size_t triangles_drawn = 0, triangles_skipped = 0;
 };
+
+// Median 3D distance between row neighbours that are both usable samples with mask != 0 (a
+// subsample of ~50k pairs; column neighbours where rows have none); 0 when there are none.
+double MedianScanSpacing(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask);
 
 Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
                                          const ResampleOptions& options,

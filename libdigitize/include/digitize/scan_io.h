@@ -9,8 +9,10 @@
 // An optional mask image (8/16-bit, 0 = missing) marks missing samples in any of them.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "digitize/core.h"
 #include "digitize/scan_data.h"
@@ -30,6 +32,10 @@ struct ScanReadOptions {
 // Errors name the file and the problem (missing, unreadable, wrong channel count, wrong size of the
 // mask, depth without pitch, ...). The result may still hold NaN/Inf samples: SanitizeScan cleans.
 Result<Scan> ReadScan(const std::filesystem::path& path, const ScanReadOptions& options);
+
+// Which channels of an XYZ image hold X, Y and Z: by name when the file names its axes ("X" or
+// "layer.X"; OpenEXR stores channels sorted by name), else the stored order (R, G, B).
+std::array<int, 3> XyzChannels(const std::vector<std::string>& names);
 
 // Writes a scan as a 3-channel float EXR (X, Y, Z in mm, NaN = missing), atomically.
 Status WriteScanExr(const std::filesystem::path& path, const Scan& scan);
