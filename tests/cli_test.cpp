@@ -111,6 +111,7 @@ TEST_F(CliTest, ScansAboveMaxScanSamplesAreRefused) {
   EXPECT_NE(refused.text.find("scan.exr"), std::string::npos) << refused.text;
   EXPECT_NE(refused.text.find("9216"), std::string::npos) << refused.text;
   EXPECT_NE(refused.text.find("9215"), std::string::npos) << refused.text;
+  EXPECT_NE(refused.text.find("--tile-texels"), std::string::npos) << "what to do";
   EXPECT_FALSE(fs::exists(Path("out")));
   Output read = RunCli("preprocess " + Path("s/scan.exr") + " --out " + Path("out") +
                        " --max-scan-samples 9216");

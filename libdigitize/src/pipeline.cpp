@@ -3,6 +3,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "digitize/image_io.h"
 #include "digitize/output_dir.h"
 #include "digitize/provenance.h"
 #include "digitize/relight.h"
@@ -152,6 +153,23 @@ Result<PreprocessResult> PreprocessToFolder(const PreprocessFolderOptions& optio
     });
     if (!written.ok()) return Error{written.message()};
     return std::move(*tiled);
+  }
+  // A scan image too large to hold whole: say what to do (the reader's own refusal names the
+  // limit only). Other files (PLY) are checked by the reader.
+  for (const std::string& scan : options.scans) {
+    const Result<ImageHeader> header = ReadImageHeader(scan);
+    if (!header.ok()) continue;
+    const uint64_t samples =
+        static_cast<uint64_t>(header->width) * static_cast<uint64_t>(header->height);
+    if (samples > options.read.max_samples)
+      return Error{scan + ": " + std::to_string(header->width) + "x" +
+                   std::to_string(header->height) + " = " + std::to_string(samples) +
+                   " samples, more than the " + std::to_string(options.read.max_samples) +
+                   " a whole preprocess takes (--max-scan-samples; ~22 bytes of memory a sample, " +
+                   std::to_string((samples * 22) >> 20) + " MB): " +
+                   (header->channels == 3 && !header->integer_samples
+                        ? "preprocess it in tiles (--tile-texels 2048), or raise the limit"
+                        : "raise the limit (only an XYZ float scan is preprocessed in tiles)")};
   }
   Result<std::vector<Scan>> exposures = ReadScans(options.scans, options.read);
   if (!exposures.ok()) return exposures.error();
