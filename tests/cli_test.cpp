@@ -129,7 +129,7 @@ TEST_F(CliTest, PreprocessInTilesWritesTheCanvasFolder) {
                         " --tile-texels 64 --canvas-stride 2");
   ASSERT_EQ(tiled.exit_code, 0) << tiled.text;
   EXPECT_NE(tiled.text.find("one scan sample in 2 x 2"), std::string::npos) << tiled.text;
-  EXPECT_NE(tiled.text.find("tiles of 64"), std::string::npos) << tiled.text;
+  EXPECT_NE(tiled.text.find("tile(s) of 64"), std::string::npos) << tiled.text;
   auto in = OIIO::ImageInput::open(Path("c/height.exr"));
   ASSERT_TRUE(in);
   EXPECT_GT(in->spec().width, 128) << "more than two tiles across";

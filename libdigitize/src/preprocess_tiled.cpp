@@ -395,7 +395,7 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
   step(
       "canvas", t0,
       Format("canvas (%s): %.1f x %.1f mm, plane RMS %.4f mm, noise sigma "
-             "%.4f mm; %s; %dx%d texels at %.4f mm in %d tiles of %d + %d halo",
+             "%.4f mm; %s; %dx%d texels at %.4f mm in %d tile(s) of %d + %d halo",
              stride == 1 ? "every scan sample"
                          : Format("one scan sample in %d x %d", stride, stride).c_str(),
              canvas.extent_mm.x(), canvas.extent_mm.y(), canvas.plane_rms_mm, canvas.noise_sigma_mm,
@@ -509,7 +509,7 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
                  "or missing)"};
   const ResampleStats& rs = result.resample;
   step("resample", t0,
-       Format("resample: %dx%d texels at %.4f mm in %d tiles (%zu without canvas samples; "
+       Format("resample: %dx%d texels at %.4f mm in %d tile(s) (%zu without canvas samples; "
               "%.1f s reading the scan); %zu measured, %zu filled, %zu unfilled",
               w, h, pitch, static_cast<int>(grid.tiles.size()), empty_tiles, read_seconds,
               rs.measured, rs.filled, rs.unfilled));
