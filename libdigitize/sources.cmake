@@ -45,7 +45,7 @@ set(DIGITIZE_PREPROCESS_SOURCES
   preprocess.cpp
   preprocess_patches.cpp  # PreprocessPatches, the patch list and the registration report
   preprocess_tiled.cpp    # one scan too large to hold: the canvas strided, then tiles
-                          # (private step_text.h: the step lines of both)
+                          # (private preprocess_internal.h: what both share)
 )
 
 set(DIGITIZE_PHOTOS_HEADERS photo_set.h photo_tile_cache.h rti_basis.h rti_export.h)

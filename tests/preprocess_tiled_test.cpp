@@ -215,8 +215,6 @@ TEST_F(PreprocessTiled, StridedCanvasPassMeetsTheWholeAccuracyTargets) {
 // Bad input: a scan a tile cannot be read from alone (depth, one channel) is refused, naming
 // the file, and the output folder is not made.
 TEST_F(PreprocessTiled, RefusesADepthScanAndWritesNothing) {
-  Scan depth;
-  depth.source = "depth";
   Grid<float> z(64, 48, 1000.f);
   ASSERT_TRUE(WriteFloatExr(Path("depth.exr"), z, "Z").ok());
   PreprocessFolderOptions o;

@@ -10,15 +10,15 @@
 #include "digitize/image_io.h"
 #include "json_fields.h"
 #include "options_json.h"
-#include "step_text.h"
+#include "preprocess_internal.h"
 
 namespace digitize {
 namespace {
 
-using step_text::Clock;
+using preprocess_internal::Clock;
 
-using step_text::Format;
-using step_text::SecondsSince;
+using preprocess_internal::Format;
+using preprocess_internal::SecondsSince;
 
 constexpr double kSteps = 6;  // progress: each step counts as one sixth
 
@@ -332,50 +332,28 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
   if (ec) return Error{dir.string() + ": cannot create the output folder: " + ec.message()};
 
   const HeightField& f = result.field;
-  const ImageMetadata meta = {{"digitize:pitch_mm", Format("%.9g", f.pitch_mm)},
-                              {"digitize:frame", "canvas (docs/formats.md)"},
-                              {"digitize:version", DIGITIZE_VERSION}};
-  ImageMetadata height_meta = meta;
-  height_meta["digitize:quantity"] = "height_mm";
-  if (Status s = WriteFloatExr(dir / "height.exr", f.height_mm, "Y", height_meta); !s.ok())
-    return s;
-
-  ImageMetadata normal_meta = meta;
-  normal_meta["digitize:quantity"] = "unit normal (nx, ny, nz) in R, G, B";
-  if (Status s = WriteFloatExr(dir / "normals.exr", result.normals, {"R", "G", "B"}, normal_meta);
+  if (Status s = WriteFloatExr(dir / "height.exr", f.height_mm, "Y",
+                               preprocess_internal::HeightMapMetadata(f.pitch_mm));
       !s.ok())
     return s;
-
-  // Mask values are spread over 0..255 so the PNG is readable by eye (docs/formats.md).
+  if (Status s = WriteFloatExr(dir / "normals.exr", result.normals, {"R", "G", "B"},
+                               preprocess_internal::NormalMapMetadata(f.pitch_mm));
+      !s.ok())
+    return s;
   Grid<uint8_t> mask(f.width(), f.height());
-  for (size_t i = 0; i < mask.size(); ++i) {
-    switch (f.state.data[i]) {
-      case TexelState::kOutside:
-        mask.data[i] = 0;
-        break;
-      case TexelState::kUnfilled:
-        mask.data[i] = 85;
-        break;
-      case TexelState::kFilled:
-        mask.data[i] = 170;
-        break;
-      case TexelState::kMeasured:
-        mask.data[i] = 255;
-        break;
-    }
-  }
+  for (size_t i = 0; i < mask.size(); ++i)
+    mask.data[i] = preprocess_internal::MaskPngCode(f.state.data[i]);
   if (Status s = WritePng8(dir / "mask.png", mask); !s.ok()) return s;
+  return WritePreprocessSideFiles(dir, result, options, inputs);
+}
 
+Status WritePreprocessSideFiles(const std::filesystem::path& dir, const PreprocessResult& result,
+                                const PreprocessOptions& options,
+                                const std::vector<std::string>& inputs) {
+  const HeightField& f = result.field;
   Grid<uint8_t> scan_mask = result.canvas.mask_scan;
   for (uint8_t& v : scan_mask.data) v = v ? 255 : 0;
   if (Status s = WritePng8(dir / "canvas_mask_scan.png", scan_mask); !s.ok()) return s;
-  return WritePreprocessJson(dir, result, options, inputs);
-}
-
-Status WritePreprocessJson(const std::filesystem::path& dir, const PreprocessResult& result,
-                           const PreprocessOptions& options,
-                           const std::vector<std::string>& inputs) {
-  const HeightField& f = result.field;
   using nlohmann::json;
   json boxes = json::array();
   for (const ReliefBox& b : result.relief.boxes)

@@ -12,22 +12,19 @@
 
 #include "digitize/image_io.h"
 #include "digitize/scan_io.h"
-#include "step_text.h"
+#include "preprocess_internal.h"
 
 namespace digitize {
 namespace {
 
 namespace fs = std::filesystem;
-using step_text::Clock;
+using preprocess_internal::Clock;
 
 constexpr size_t kCanvasPassSamples = size_t{1} << 24;
-// mask.png's codes (docs/formats.md) in TexelState order: outside, measured, filled, unfilled.
-constexpr uint8_t kMaskCodes[4] = {0, 255, 170, 85};
 
-using step_text::Format;
-using step_text::SecondsSince;
-
-uint8_t MaskCode(TexelState s) { return kMaskCodes[static_cast<int>(s)]; }
+using preprocess_internal::Format;
+using preprocess_internal::MaskPngCode;
+using preprocess_internal::SecondsSince;
 
 Result<std::array<int, 3>> XyzOf(const fs::path& path, const FloatImage& image) {
   if (image.channels != 3 || image.integer_samples)
@@ -59,9 +56,7 @@ Result<StridedScan> ReadStridedScan(const fs::path& path, int stride, size_t max
           auto xyz = XyzOf(path, band);
           if (!xyz.ok()) return xyz.error();
           channel = *xyz;
-          scan.xyz_mm = Grid<Vec3f>((band.width + stride - 1) / stride, 1);
-          scan.xyz_mm.height = 0;
-          scan.xyz_mm.data.clear();
+          scan.xyz_mm.width = (band.width + stride - 1) / stride;
         }
         for (int y = (stride - y0 % stride) % stride; y < band.height; y += stride) {
           const float* in = band.pixels.data() + static_cast<size_t>(y) * band.width * 3;
@@ -87,7 +82,7 @@ Result<StridedScan> ReadStridedScan(const fs::path& path, int stride, size_t max
 }
 
 // The median of the canvas samples' distances to their right neighbours (as the whole
-// preprocess measures it: resample.h, MedianScanSpacing), over at most ~10^6 of them.
+// preprocess measures the spacing on its full-resolution scan), over at most ~10^6 of them.
 double StridedSpacing(const StridedScan& s, const Grid<uint8_t>& mask) {
   size_t count = 0;
   for (size_t i = 0; i < mask.data.size(); ++i) count += mask.data[i] != 0;
@@ -408,25 +403,22 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
             return text;
           }());
 
-  const ImageMetadata meta = {{"digitize:pitch_mm", Format("%.9g", pitch)},
-                              {"digitize:frame", "canvas (docs/formats.md)"},
-                              {"digitize:version", DIGITIZE_VERSION}};
   const double tiles_total = static_cast<double>(grid.tiles.size());
 
   // ---- 2. Resample, tile by tile; height.exr and mask.png a row of tiles at a time.
   t0 = Clock::now();
   float max_h = -std::numeric_limits<float>::infinity();
   size_t empty_tiles = 0;
-  double read_seconds = 0;  // of the scan's rectangles, through the cache
+  double read_seconds = 0;                // of the scan's rectangles, through the cache
+  size_t state_counts[4] = {0, 0, 0, 0};  // by TexelState
   // The scan's parts, cached while the tiles of a row share them; gone before the second pass.
   auto reader = std::make_unique<ImageRegionReader>(tiled.cache_mb);
   FieldStore store(dir / ".field.tmp", w, h);
   if (!store.ok())
     return Error{(dir / ".field.tmp").string() + ": cannot create (" + std::strerror(errno) + ")"};
   {
-    ImageMetadata height_meta = meta;
-    height_meta["digitize:quantity"] = "height_mm";
-    auto height_out = BandImageWriter::Open(dir / "height.exr", w, h, {"Y"}, height_meta);
+    auto height_out = BandImageWriter::Open(dir / "height.exr", w, h, {"Y"},
+                                            preprocess_internal::HeightMapMetadata(pitch));
     if (!height_out.ok()) return height_out.error();
     auto mask_out = BandImageWriter::Open(dir / "mask.png", w, h, {});
     if (!mask_out.ok()) return mask_out.error();
@@ -476,21 +468,8 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
       }
       strip.mask.resize(strip.state.size());
       for (size_t i = 0; i < strip.state.size(); ++i) {
-        strip.mask[i] = MaskCode(strip.state[i]);
-        switch (strip.state[i]) {
-          case TexelState::kMeasured:
-            ++result.resample.measured;
-            break;
-          case TexelState::kFilled:
-            ++result.resample.filled;
-            break;
-          case TexelState::kUnfilled:
-            ++result.resample.unfilled;
-            break;
-          case TexelState::kOutside:
-            ++result.resample.outside;
-            break;
-        }
+        strip.mask[i] = MaskPngCode(strip.state[i]);
+        ++state_counts[static_cast<int>(strip.state[i])];
       }
       if (Status s = store.WriteRows(first.cy0, strip); !s.ok()) return Error{s.message()};
       if (Status s = (*height_out)->Write(strip.height.data(), strip.rows); !s.ok())
@@ -503,6 +482,10 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
   }
   reader.reset();
   result.resample.texels = static_cast<size_t>(w) * h;
+  result.resample.outside = state_counts[static_cast<int>(TexelState::kOutside)];
+  result.resample.measured = state_counts[static_cast<int>(TexelState::kMeasured)];
+  result.resample.filled = state_counts[static_cast<int>(TexelState::kFilled)];
+  result.resample.unfilled = state_counts[static_cast<int>(TexelState::kUnfilled)];
   if (result.resample.measured == 0)
     return Error{src +
                  ": no canvas texel could be measured (every tile's triangles were skipped "
@@ -520,13 +503,9 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
   ReliefResult& relief = result.relief;
   relief.cell_px = cell;
   relief.max_height_mm = max_h;
-  const bool has_relief = max_h > relief_options.min_relief_mm;
-  relief.delta0_mm = has_relief ? relief_options.delta0_fraction * max_h : 0.0;
   {
-    ImageMetadata normal_meta = meta;
-    normal_meta["digitize:quantity"] = "unit normal (nx, ny, nz) in R, G, B";
-    auto normals_out =
-        BandImageWriter::Open(dir / "normals.exr", w, h, {"R", "G", "B"}, normal_meta);
+    auto normals_out = BandImageWriter::Open(dir / "normals.exr", w, h, {"R", "G", "B"},
+                                             preprocess_internal::NormalMapMetadata(pitch));
     if (!normals_out.ok()) return normals_out.error();
     Strip strip;
     for (int iy = 0; iy < grid.ny; ++iy) {
@@ -544,19 +523,20 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
         win.window = TexelWindow{tile.wx0, tile.wy0, w, h, max_h};
         if (Status s = store.ReadWindow(tile.wx0, tile.wy0, ww, wh, win); !s.ok())
           return Error{s.message()};
-        if (has_relief) {
-          const ReliefResult r = ClassifyRelief(win, relief_options);
-          for (ReliefBox b : r.boxes) {
-            b.x0 += tile.wx0, b.y0 += tile.wy0, b.u_max += tile.wx0, b.v_max += tile.wy0;
-            if (b.x0 >= tile.cx0 && b.x0 < tile.cx1 && b.y0 >= tile.cy0 && b.y0 < tile.cy1)
-              relief.boxes.push_back(b);
-          }
-          for (int y = tile.cy0; y < tile.cy1; ++y)
-            for (int x = tile.cx0; x < tile.cx1; ++x)
-              relief.texels_above += r.valid(x - tile.wx0, y - tile.wy0);
-          relief.components_kept += r.components_kept;
-          relief.components_removed += r.components_removed;
+        // The window takes the canvas's H, so every tile's delta0 is the canvas's (0 for a flat
+        // canvas, and in a window with no height at all).
+        const ReliefResult r = ClassifyRelief(win, relief_options);
+        relief.delta0_mm = std::max(relief.delta0_mm, r.delta0_mm);
+        for (ReliefBox b : r.boxes) {
+          b.x0 += tile.wx0, b.y0 += tile.wy0, b.u_max += tile.wx0, b.v_max += tile.wy0;
+          if (b.x0 >= tile.cx0 && b.x0 < tile.cx1 && b.y0 >= tile.cy0 && b.y0 < tile.cy1)
+            relief.boxes.push_back(b);
         }
+        for (int y = tile.cy0; y < tile.cy1; ++y)
+          for (int x = tile.cx0; x < tile.cx1; ++x)
+            relief.texels_above += r.valid(x - tile.wx0, y - tile.wy0);
+        relief.components_kept += r.components_kept;
+        relief.components_removed += r.components_removed;
         const Grid<Vec3f> normals = ComputeNormals(win);
         for (int y = tile.cy0; y < tile.cy1; ++y) {
           const Vec3f* in = normals.Row(y - tile.wy0) + (tile.cx0 - tile.wx0);
@@ -588,12 +568,8 @@ Result<PreprocessResult> PreprocessScanTiled(const fs::path& scan_path,
   result.field.pitch_mm = pitch;
   result.field.frame = result.canvas.frame;
   result.field.window = TexelWindow{0, 0, w, h, max_h};
-  Grid<uint8_t> scan_mask = result.canvas.mask_scan;
-  for (uint8_t& v : scan_mask.data) v = v ? 255 : 0;
-  if (Status s = WritePng8(dir / "canvas_mask_scan.png", scan_mask); !s.ok())
-    return Error{s.message()};
   result.total_seconds = SecondsSince(start);
-  if (Status s = WritePreprocessJson(dir, result, options, inputs); !s.ok())
+  if (Status s = WritePreprocessSideFiles(dir, result, options, inputs); !s.ok())
     return Error{s.message()};
   ReportProgress(progress, "done", 1.0);
   return result;

@@ -629,13 +629,6 @@ Result<HeightField> Resample(const Scan& scan, const CanvasResult& canvas,
 
 }  // namespace
 
-double MedianScanSpacing(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask) {
-  size_t count = 0;
-  for (size_t i = 0; i < xyz.data.size(); ++i) count += mask.data[i] && Usable(xyz.data[i]);
-  const double spacing = MedianSpacing(xyz, mask, 1, 0, count);
-  return spacing > 0 ? spacing : MedianSpacing(xyz, mask, 0, 1, count);
-}
-
 Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
                                          const ResampleOptions& options, ResampleStats* stats) {
   return Resample(scan, canvas, options, stats, nullptr);

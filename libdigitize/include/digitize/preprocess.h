@@ -106,12 +106,13 @@ Status WritePreprocessOutputs(const std::filesystem::path& dir, const Preprocess
                               const PreprocessOptions& options,
                               const std::vector<std::string>& inputs);
 
-// The JSON files of WritePreprocessOutputs alone (boxes.json, transform.json, report.json and
-// registration.json for patches), for a result whose maps were written as they were made
-// (preprocess_tiled.h: its field holds no grids, field.window says the canvas's size).
-Status WritePreprocessJson(const std::filesystem::path& dir, const PreprocessResult& result,
-                           const PreprocessOptions& options,
-                           const std::vector<std::string>& inputs);
+// What WritePreprocessOutputs writes besides the three texel maps: canvas_mask_scan.png and the
+// JSON files (boxes.json, transform.json, report.json, and registration.json for patches), for a
+// result whose maps were written as they were made (preprocess_tiled.h: its field holds no
+// grids, field.window says the canvas's size).
+Status WritePreprocessSideFiles(const std::filesystem::path& dir, const PreprocessResult& result,
+                                const PreprocessOptions& options,
+                                const std::vector<std::string>& inputs);
 
 // What later stages need from a preprocess output folder (WritePreprocessOutputs): the height
 // field (height.exr + mask.png states), the normals and canvas_from_scan (transform.json).

@@ -34,10 +34,6 @@ struct ResampleStats {
   size_t triangles_drawn = 0, triangles_skipped = 0;
 };
 
-// Median 3D distance between row neighbours that are both usable samples with mask != 0 (a
-// subsample of ~50k pairs; column neighbours where rows have none); 0 when there are none.
-double MedianScanSpacing(const Grid<Vec3f>& xyz, const Grid<uint8_t>& mask);
-
 Result<HeightField> ResampleToCanvasGrid(const Scan& scan, const CanvasResult& canvas,
                                          const ResampleOptions& options,
                                          ResampleStats* stats = nullptr);
