@@ -29,14 +29,15 @@ struct Output {
   std::string text;  // stdout + stderr
 };
 
-// `digitize ARGS`, run from `cwd` when given.
-Output RunCli(const std::string& args, const fs::path& cwd = {}) {
+// `digitize ARGS`, run from `cwd` when given, with `env` (NAME=VALUE ...) when given.
+Output RunCli(const std::string& args, const fs::path& cwd = {}, const std::string& env = {}) {
   static int counter = 0;
   const fs::path log =
       digitize::test::ScratchPath("digitize_cli_test", std::to_string(counter++) + ".log");
   const std::string cd = cwd.empty() ? "" : "cd '" + cwd.string() + "' && ";
-  const std::string command =
-      "(" + cd + std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() + " 2>&1";
+  const std::string command = "(" + cd + (env.empty() ? "" : "env " + env + " ") +
+                              std::string(DIGITIZE_CLI) + " " + args + ") > " + log.string() +
+                              " 2>&1";
   const int status = std::system(command.c_str());
   Output out;
   out.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -72,6 +73,24 @@ TEST_F(CliTest, HelpForEveryCommand) {
 }
 
 TEST_F(CliTest, NoCommandIsAUsageError) { EXPECT_EQ(RunCli("").exit_code, 1); }
+
+// A build for AVX2 and FMA (DIGITIZE_SIMD) started on a CPU without them says so before any of
+// its own code runs, instead of dying of SIGILL; a baseline build has no such check.
+TEST_F(CliTest, AnAvx2BuildOnACpuWithoutItSaysWhatToDo) {
+  const Output version = RunCli("--version");
+  ASSERT_EQ(version.exit_code, 0);
+  const bool v3 = version.text.find("(x86-64-v3)") != std::string::npos;
+  if (!v3) ASSERT_NE(version.text.find("(baseline)"), std::string::npos) << version.text;
+  const Output old_cpu = RunCli("--version", {}, "DIGITIZE_TEST_CPU_WITHOUT_X86_64_V3=1");
+  if (!v3) {
+    EXPECT_EQ(old_cpu.exit_code, 0) << old_cpu.text;
+    return;
+  }
+  EXPECT_EQ(old_cpu.exit_code, 1);
+  EXPECT_NE(old_cpu.text.find("AVX2 and FMA"), std::string::npos) << old_cpu.text;
+  EXPECT_NE(old_cpu.text.find("-DDIGITIZE_SIMD=NONE"), std::string::npos) << old_cpu.text;
+  EXPECT_EQ(old_cpu.text.find("digitize 0."), std::string::npos) << "ran on: " << old_cpu.text;
+}
 
 TEST_F(CliTest, MissingScanNamesTheFile) {
   Output out = RunCli("preprocess " + Path("nope.exr") + " --out " + Path("out"));

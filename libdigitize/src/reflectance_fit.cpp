@@ -483,6 +483,7 @@ std::string ReflectanceReportJson(const ReflectanceFitResult& result,
   json doc = {{"format", "digitize.fit_report"},
               {"version", 1},
               {"tool_version", DIGITIZE_VERSION},
+              {"simd_level", DIGITIZE_SIMD_LEVEL},  // float rounding differs between levels
               {"inputs", inputs},
               {"model",
                {{"name", "lafortune-1-lobe"},

@@ -11,7 +11,8 @@ int main(int argc, char** argv) {
       "digitize: turn a scanned painting into a compact, relightable, real-time digital copy.\n"
       "Start with `digitize demo`, then `digitize <command> --help`."};
   app.require_subcommand(1);
-  app.set_version_flag("--version", std::string("digitize ") + DIGITIZE_VERSION);
+  app.set_version_flag(
+      "--version", std::string("digitize ") + DIGITIZE_VERSION + " (" + DIGITIZE_SIMD_LEVEL + ")");
   int exit_code = 0;
   digitize::cli::AddSynthCommand(app, exit_code);
   digitize::cli::AddPreprocessCommand(app, exit_code);
