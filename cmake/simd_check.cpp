@@ -7,9 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-namespace {
-
-bool CpuHasX86_64_V3() {
+static bool CpuHasX86_64_V3() {
 #if defined(__x86_64__)
   __builtin_cpu_init();
 #if defined(__clang__)  // clang 14 knows no level names: the features the kernels use
@@ -25,10 +23,9 @@ bool CpuHasX86_64_V3() {
 }
 
 #if defined(DIGITIZE_SIMD_PROBE)
-}  // namespace
 int main() { return CpuHasX86_64_V3() ? 0 : 1; }
 #elif defined(DIGITIZE_SIMD_X86_64_V3)
-__attribute__((constructor(101))) void RefuseCpuWithoutX86_64_V3() {
+__attribute__((constructor(101))) static void RefuseCpuWithoutX86_64_V3() {
   // The variable plays an older CPU, for the test of this message (CliTest).
   if (CpuHasX86_64_V3() && !std::getenv("DIGITIZE_TEST_CPU_WITHOUT_X86_64_V3")) return;
   std::fputs(
@@ -39,7 +36,4 @@ __attribute__((constructor(101))) void RefuseCpuWithoutX86_64_V3() {
       stderr);
   std::_Exit(1);
 }
-}  // namespace
-#else
-}  // namespace
 #endif

@@ -44,18 +44,17 @@ using ArrayMap = Eigen::Map<Eigen::ArrayXf>;
 // Per-thread storage for one texel's samples as arrays (structure of arrays, so Eigen
 // vectorises every pass over the samples, exp and log included). Capacity grows, never shrinks.
 // Every array starts aligned for Eigen's widest packet (aligned_allocator, a capacity in whole
-// 64-byte lines): Eigen sums a map of unknown alignment as a scalar head
-// up to the first aligned packet, then packets, so where an array starts would change the order
-// of the sum, and with it the rounding: with 8-float (AVX) packets and malloc's 16-byte alignment
-// a texel's fit depended on which thread's workspace it ran in.
+// 64-byte lines): Eigen sums a map of unknown alignment as a scalar head up to the first aligned
+// packet, then packets, so where an array starts would change the order of the sum, and with it
+// the rounding: with 8-float (AVX) packets and malloc's 16-byte alignment a texel's fit depended
+// on which thread's workspace it ran in.
 class Workspace {
  public:
   static constexpr int kArrays = 48;
   static constexpr int kAlignFloats = 16;  // 64 bytes
   float* Reserve(int n) {
     if (n > capacity_) {
-      capacity_ = std::max(n, 2 * capacity_);
-      capacity_ = (capacity_ + kAlignFloats - 1) / kAlignFloats * kAlignFloats;
+      capacity_ = (std::max(n, 2 * capacity_) + kAlignFloats - 1) / kAlignFloats * kAlignFloats;
       storage_.assign(static_cast<size_t>(capacity_) * kArrays, 0.0f);
     }
     return storage_.data();
