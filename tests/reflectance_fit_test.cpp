@@ -510,9 +510,13 @@ TEST(ReflectanceSamples, SharedViewsAndHorizonsGiveExactlyThePerPhotoSamples) {
   auto tracer = HeightFieldTracer::Build(canvas);
   ASSERT_TRUE(tracer.ok()) << tracer.error().message;
   const PixelTexelMaps maps = MapPixelsToTexels(set, canvas, RigidTransform{}, *tracer);
-  std::vector<uint32_t> texels(static_cast<size_t>(w * h));
-  for (size_t t = 0; t < texels.size(); ++t) texels[t] = static_cast<uint32_t>(t);
+  // Every texel (rows of 8 side by side: the bounds' vector path), and every texel but each
+  // fifth (runs of 4: the bounds' one-texel path).
+  for (const int skip : {0, 5})
   for (bool with_maps : {false, true}) {
+    std::vector<uint32_t> texels;
+    for (uint32_t t = 0; t < static_cast<uint32_t>(w * h); ++t)
+      if (skip == 0 || t % skip != 0) texels.push_back(t);
     const SampleScene scene{&canvas, &normals, RigidTransform{},
                             &set,    &*tracer, with_maps ? &maps : nullptr};
     ASSERT_TRUE(ValidateSampleScene(scene).ok());

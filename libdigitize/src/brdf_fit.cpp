@@ -91,10 +91,14 @@ Shape GridInit(TexelProblem& problem, const Bounds& bounds) {
   return init;
 }
 
-// The GGX grid over log alpha: a factor 1.5 between points (12 points over 0.01 .. 1) keeps
+// The GGX grid over log alpha: a factor 2.25 between points (7 points over 0.01 .. 1) keeps
 // the reduced cost unimodal between a point's neighbours in every case we measured, so Brent's
-// method on that bracket finds the minimum the grid points at.
-constexpr double kGgxGridFactor = 1.5;
+// method on that bracket finds the minimum the grid points at. Measured against a factor 1.5
+// (12 points), 2026-12-07: the GGX painting's held-out PSNR the same to 0.01 dB in all six
+// cases of reflectance_fit_ggx_test, brdf_fit_bench's relighting error the same or lower with
+// noise (0.00432 -> 0.00428 on GGX truth), the fit 8 % faster; at 3.375 the noise-free GGX
+// truth's error grew (0.00018 -> 0.00022) for 3 % more.
+constexpr double kGgxGridFactor = 2.25;
 
 GgxStart GgxGridInit(TexelProblem& problem, const BrdfFitOptions& options) {
   GgxStart start;
@@ -113,6 +117,8 @@ GgxStart GgxGridInit(TexelProblem& problem, const BrdfFitOptions& options) {
   start.t = ts[best];
   start.bracket_lo = ts[std::max(0, best - 1)];
   start.bracket_hi = ts[std::min(count - 1, best + 1)];
+  if (best > 0) start.cost_lo = costs[best - 1];
+  if (best + 1 < count) start.cost_hi = costs[best + 1];
   return start;
 }
 
@@ -389,10 +395,23 @@ std::string BrdfFitSummary::BriefReport() const {
 }
 
 TexelFit FitBrdfTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& options) {
-  const Status valid = options.Validate();
-  DIGITIZE_CHECK(valid.ok(), "FitBrdfTexel: " + valid.message());
+  return BrdfTexelFitter(options).Fit(samples);
+}
+
+struct BrdfTexelFitter::Scratch {
   Workspace ws;
-  return FitTexel(samples, options, ws);
+};
+
+BrdfTexelFitter::BrdfTexelFitter(const BrdfFitOptions& options)
+    : options_(options), scratch_(std::make_unique<Scratch>()) {
+  const Status valid = options.Validate();
+  DIGITIZE_CHECK(valid.ok(), "BrdfTexelFitter: " + valid.message());
+}
+
+BrdfTexelFitter::~BrdfTexelFitter() = default;
+
+TexelFit BrdfTexelFitter::Fit(std::span<const BrdfSample> samples) {
+  return FitTexel(samples, options_, scratch_->ws);
 }
 
 Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& options,

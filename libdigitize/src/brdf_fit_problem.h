@@ -295,29 +295,48 @@ class TexelProblem {
   // sums: exact enough to compare alphas; GgxSse measures it directly).
   LinearFit SolveGgx(double alpha, std::array<ChannelSums, 3>* sums_out = nullptr,
                      double* sse_out = nullptr) {
-    const float a2 = static_cast<float>(alpha * alpha);
-    auto nv = View(kNv), nl = View(kNl);
-    auto q = View(kTmp);
-    // q = D G1(v) G1(l) / (4 n.v n.l) with G1(x) = 2 x / (x + S(x)), S(x) = sqrt(a2 + (1 - a2)
-    // x^2): the 2 n.v 2 n.l cancel the 4 n.v n.l, which leaves one division per sample, not four.
-    View(kO) = (a2 - 1.0f) * View(kNh2) + 1.0f;  // D's denominator (o is written below)
-    q = (a2 / static_cast<float>(kPi)) /
-        (View(kO).square() * (nv + (a2 + (1.0f - a2) * nv.square()).sqrt()) *
-         (nl + (a2 + (1.0f - a2) * nl.square()).sqrt()));
-    View(kU) = q * (1.0f - View(kM5));
-    View(kO) = q * View(kM5);
-    // Padded samples have e = L = 0: their u, o are finite and contribute nothing.
+    const float a2 = static_cast<float>(alpha * alpha), one_minus_a2 = 1.0f - a2;
+    const float d_scale = a2 / static_cast<float>(kPi);
+    const float *nh2 = Slot(kNh2), *m5 = Slot(kM5), *nv = Slot(kNv), *nl = Slot(kNl);
+    float *u_ptr = Slot(kU), *o_ptr = Slot(kO);
+    // One pass for u, o and every channel's sums: an Eigen expression per sum was 15 passes of a
+    // few blocks each, whose setup and tails cost more than the arithmetic (measured).
+    // Per channel, with the target r = L - e o: s1 = sum e^2 u, s2 = sum e^2 u^2,
+    // p0 = sum e r, p1 = sum e r u, ll = sum r^2.
+    std::array<std::array<Block, 5>, 3> acc;
+    for (auto& channel : acc)
+      for (Block& x : channel) x.setZero();
+    for (int i = 0; i < np_; i += kBlock) {
+      // q = D G1(v) G1(l) / (4 n.v n.l) with G1(x) = 2 x / (x + S(x)), S(x) = sqrt(a2 + (1 -
+      // a2) x^2): the 2 n.v 2 n.l cancel the 4 n.v n.l, which leaves one division per sample.
+      const Block v = Block::Map(nv + i), l = Block::Map(nl + i);
+      const Block den = (a2 - 1.0f) * Block::Map(nh2 + i) + 1.0f;  // D's denominator
+      const Block q = d_scale / (den.square() * (v + (a2 + one_minus_a2 * v.square()).sqrt()) *
+                                 (l + (a2 + one_minus_a2 * l.square()).sqrt()));
+      const Block m = Block::Map(m5 + i), u = q * (1.0f - m), o = q * m;
+      Block::Map(u_ptr + i) = u;
+      Block::Map(o_ptr + i) = o;
+      // Padded samples have e = L = 0: their u, o are finite and contribute nothing.
+      for (int c = 0; c < 3; ++c) {
+        const Block e = Block::Map(Slot(kE + c) + i);
+        const Block r = Block::Map(Slot(kL + c) + i) - e * o, er = e * r;
+        const Block e2u = Block::Map(Slot(kE2 + c) + i) * u;
+        acc[c][0] += e2u;
+        acc[c][1] += e2u * u;
+        acc[c][2] += er;
+        acc[c][3] += er * u;
+        acc[c][4] += r.square();
+      }
+    }
     LinearFit fit;
     double sse = 0;
     for (int c = 0; c < 3; ++c) {
-      const auto u = View(kU), o = View(kO);
       ChannelSums m = sums_[c];
-      const auto eo = e(c) * o;
-      m.s1 = (e2(c) * u).sum();
-      m.s2 = (e2(c) * u.square()).sum();
-      m.p0 = sums_[c].p0 - (e(c) * eo).sum();
-      m.p1 = ((el(c) - e(c) * eo) * u).sum();
-      m.ll = (L(c) - eo).square().sum();
+      m.s1 = acc[c][0].sum();
+      m.s2 = acc[c][1].sum();
+      m.p0 = acc[c][2].sum();
+      m.p1 = acc[c][3].sum();
+      m.ll = acc[c][4].sum();
       fit.channel[c] = SolveChannel(m, 1.0);
       sse += m.ll + QuadraticCost(m, fit.channel[c].a, fit.channel[c].b);
       if (sums_out) (*sums_out)[c] = m;
@@ -325,15 +344,21 @@ class TexelProblem {
     if (sse_out) *sse_out = std::max(0.0, sse);
     return fit;
   }
-  // Exact weighted squared error of the GGX model for the alpha set last (SolveGgx).
+  // Exact weighted squared error of the GGX model for the alpha set last (SolveGgx), one pass.
   double GgxSse(const LinearFit& fit) {
-    double sse = 0;
+    float a[3], b[3];
     for (int c = 0; c < 3; ++c) {
-      const float a = static_cast<float>(fit.channel[c].a),
-                  b = static_cast<float>(fit.channel[c].b);
-      sse += (e(c) * (a + b * View(kU) + View(kO)) - L(c)).square().sum();
+      a[c] = static_cast<float>(fit.channel[c].a);
+      b[c] = static_cast<float>(fit.channel[c].b);
     }
-    return sse;
+    Block acc = Block::Zero();
+    for (int i = 0; i < np_; i += kBlock) {
+      const Block u = Block::Map(Slot(kU) + i), o = Block::Map(Slot(kO) + i);
+      for (int c = 0; c < 3; ++c)
+        acc += (Block::Map(Slot(kE + c) + i) * (a[c] + b[c] * u + o) - Block::Map(Slot(kL + c) + i))
+                   .square();
+    }
+    return acc.sum();
   }
 
   // The base for (cx, cy), clamped below at kLobeBaseEps, and its log, kLogZero where the base
@@ -360,7 +385,12 @@ class TexelProblem {
     tmp() = kf * log_base();
     g() = tmp().max(kMinLobeLog).min(kMaxLobeLog).exp();  // vectorised, then the select
     g() = (tmp() > kMinLobeLog).select(g(), 0.0f);
-    if (!derivatives) return;
+    if (derivatives) SetDerivatives();
+  }
+  // The derivatives of g for the shape set last, when SetShape left them out: LM measures a trial
+  // shape without them and needs them only once it takes the step.
+  void SetDerivatives() {
+    const float kf = static_cast<float>(k_);
     tmp() = kf * g() / base();  // dg/dc = k g / base * dbase/dc
     d(0) = tmp() * View(kAx);
     d(1) = tmp() * View(kAy);

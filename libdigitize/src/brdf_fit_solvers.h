@@ -6,6 +6,8 @@
 // Private to the BRDF layer.
 #pragma once
 
+#include <limits>
+
 #include "brdf_fit_problem.h"
 #include "digitize/brdf_fit.h"
 
@@ -41,9 +43,12 @@ LobeFitOutcome FitLobeCeres(TexelProblem& problem, Shape init, const Bounds& bou
 LobeSolver LobeSolverFor(BrdfFitMethod method);
 
 // GGX (brdf_fit_problem.h): only t = log alpha is nonlinear. `start` comes from the front end's
-// grid: the best grid point and its neighbours (the bracket), inside [t_lo, t_hi], the bounds.
+// grid: the best grid point and its neighbours (the bracket), inside [t_lo, t_hi], the bounds,
+// and the grid's costs there (from the sums; NaN where a bracket end is t itself).
 struct GgxStart {
   double t = 0, bracket_lo = 0, bracket_hi = 0, t_lo = 0, t_hi = 0;
+  double cost_lo = std::numeric_limits<double>::quiet_NaN(),
+         cost_hi = std::numeric_limits<double>::quiet_NaN();
 };
 struct GgxFitOutcome {
   double t = 0;      // log alpha, inside the bounds

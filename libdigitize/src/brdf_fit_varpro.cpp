@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <utility>
 
 #include "brdf_fit_problem.h"
 #include "brdf_fit_solvers.h"
@@ -253,7 +254,7 @@ LobeFitOutcome FitLobeVarPro(TexelProblem& problem, Shape shape, const Bounds& b
         ++it;
         break;
       }
-      problem.SetShape(shape, true);
+      problem.SetDerivatives();  // g is the trial's, now the shape's
       problem.NormalEquations(linear, sums, shape, &jtj, &jtr);
       lambda *= std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3));
       nu = 2.0;
@@ -291,6 +292,14 @@ GgxFitOutcome FitGgxVarPro(TexelProblem& problem, const GgxStart& start,
   double x = std::clamp(start.t, a, b), w = x, v = x;
   double fx = cost(x), fw = fx, fv = fx;
   double d = 0, e = 0;
+  // Inside the grid the bracket ends are the grid's neighbours of x: Brent's two other points,
+  // so its first step is the grid's parabola, not a golden section (a step of the bracket's
+  // width "before last" lets the parabola be tried).
+  if (a < x && x < b && std::isfinite(start.cost_lo) && std::isfinite(start.cost_hi)) {
+    w = a, fw = start.cost_lo, v = b, fv = start.cost_hi;
+    if (fv < fw) std::swap(w, v), std::swap(fw, fv);
+    e = b - a;
+  }
   GgxFitOutcome out;
   int it = 0;
   for (; it < options.max_iterations; ++it) {

@@ -1,6 +1,8 @@
 #include "digitize/reflectance_fit.h"
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cctype>
@@ -23,6 +25,10 @@ using Clock = std::chrono::steady_clock;
 double Since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
+
+// Texels per task of the fit loop: large enough to amortise a fitter's scratch, small enough to
+// balance (as FitBrdf's).
+constexpr size_t kFitGrain = 64;
 
 std::string Format(const char* fmt, auto... args) {
   char buffer[512];
@@ -47,43 +53,30 @@ size_t RemoveDarkOutliers(std::span<const BrdfSample> in, const LafortuneParams&
 
 // Before any fit: the diffuse floor of a texel is estimated as the median apparent reflectance
 // q = sum_c radiance / sum_c E over its samples (the lobe only raises q, and a shadow drops it to
-// ~0, so the median sits at or a little above rho_d whenever most samples are lit). Samples far
-// below that floor are removed from `samples` in place (texel_begin updated). Returns the count.
-size_t PrefilterDarkOutliers(BrdfSamples& samples, const ReflectanceFitOptions& o,
-                             std::vector<size_t>& removed) {
+// ~0, so the median sits at or a little above rho_d whenever most samples are lit). The samples
+// of `in` not far below that floor go to `out`; `q` is scratch. Returns how many were left out.
+size_t PrefilterDarkOutliers(std::span<const BrdfSample> in, const ReflectanceFitOptions& o,
+                             std::vector<double>& q, std::vector<BrdfSample>& out) {
   const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
-  std::vector<BrdfSample>& all = samples.samples;
-  std::vector<size_t>& begin = samples.texel_begin;
-  std::vector<double> q;
-  size_t write = 0, total = 0;
-  for (size_t t = 0; t + 1 < begin.size(); ++t) {
-    const size_t b = begin[t], e = begin[t + 1];
-    q.clear();
-    for (size_t i = b; i < e; ++i) {
-      const double irradiance = all[i].irradiance.sum();
-      if (irradiance > 0) q.push_back(all[i].radiance.sum() / irradiance);
-    }
-    double floor_q = 0;
-    if (q.size() >= 3) {
-      const auto mid = q.begin() + static_cast<std::ptrdiff_t>(q.size() / 2);
-      std::nth_element(q.begin(), mid, q.end());
-      floor_q = *mid;
-    }
-    begin[t] = write;
-    for (size_t i = b; i < e; ++i) {
-      const double floor = floor_q * all[i].irradiance.sum();
-      const double seen = all[i].radiance.sum();
-      if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) {
-        ++removed[t];
-        ++total;
-        continue;
-      }
-      all[write++] = all[i];
-    }
+  q.clear();
+  for (const BrdfSample& s : in) {
+    const double irradiance = s.irradiance.sum();
+    if (irradiance > 0) q.push_back(s.radiance.sum() / irradiance);
   }
-  begin.back() = write;
-  all.resize(write);
-  return total;
+  double floor_q = 0;
+  if (q.size() >= 3) {
+    const auto mid = q.begin() + static_cast<std::ptrdiff_t>(q.size() / 2);
+    std::nth_element(q.begin(), mid, q.end());
+    floor_q = *mid;
+  }
+  out.clear();
+  for (const BrdfSample& s : in) {
+    const double floor = floor_q * s.irradiance.sum();
+    const double seen = s.radiance.sum();
+    if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) continue;
+    out.push_back(s);
+  }
+  return in.size() - out.size();
 }
 
 // Which photos can give samples at all, and how many distinct (light, view) pairs they hold (see
@@ -246,6 +239,8 @@ Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
   size_t lobe_texels = 0;
   const size_t tile = static_cast<size_t>(options.tile_texels);
   BrdfSamples samples;
+  tbb::task_arena arena(fit_options.num_threads > 0 ? fit_options.num_threads
+                                                    : tbb::task_arena::automatic);
   for (size_t begin = 0; begin < texels.size(); begin += tile) {
     const std::span<const uint32_t> part(texels.data() + begin,
                                          std::min(tile, texels.size() - begin));
@@ -255,64 +250,71 @@ Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
     GatherSamples(scene, part, options.samples, samples, report.samples, true, &buffers);
     report.seconds_samples += Since(t0);
 
+    // Each texel's samples are read once, in the fit's own parallel loop: filtered on the way in
+    // (PrefilterDarkOutliers), fitted, and refitted without the samples its fit shows dark
+    // (RemoveDarkOutliers). As separate passes over the tile's samples (filter, fit, refit) they
+    // were a tenth of the fit stage, the serial filter most of it.
     t0 = Clock::now();
-    std::vector<size_t> removed(part.size(), 0);
-    if (options.dark_outlier_ratio > 0) PrefilterDarkOutliers(samples, options, removed);
-    auto fitted = FitBrdf(samples, fit_options);
-    if (!fitted.ok()) return fitted.error();  // options were validated: not expected
-    BrdfFitResult& fit = *fitted;
-    if (options.dark_outlier_ratio > 0 && options.dark_outlier_rounds > 0) {
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, part.size(), 256),
-                        [&](const tbb::blocked_range<size_t>& r) {
-                          std::vector<BrdfSample> kept, current;
-                          for (size_t t = r.begin(); t != r.end(); ++t) {
-                            std::span<const BrdfSample> in = samples.Texel(t);
-                            for (int round = 0; round < options.dark_outlier_rounds; ++round) {
-                              const size_t n = RemoveDarkOutliers(in, fit.params[t], options, kept);
-                              if (n == 0) break;
-                              removed[t] += n;
-                              current.swap(kept);
-                              in = current;
-                              const TexelFit refit = FitBrdfTexel(in, fit_options);
-                              fit.params[t] = refit.params;
-                              fit.model[t] = refit.model;
-                              fit.ggx[t] = refit.ggx;
-                              fit.status[t] = refit.status;
-                              fit.rms_error[t] = refit.rms_error;
-                            }
-                          }
-                        });
-    }
+    std::vector<TexelFit> fit(part.size());
+    std::vector<size_t> removed(part.size(), 0), given(part.size(), 0);
+    arena.execute([&] {
+      tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, part.size(), kFitGrain),
+        [&](const tbb::blocked_range<size_t>& r) {
+          BrdfTexelFitter fitter(fit_options);
+          std::vector<BrdfSample> kept, current;
+          std::vector<double> q;
+          for (size_t t = r.begin(); t != r.end(); ++t) {
+            std::span<const BrdfSample> in = samples.Texel(t);
+            if (options.dark_outlier_ratio > 0)
+              if (const size_t n = PrefilterDarkOutliers(in, options, q, current); n > 0) {
+                removed[t] += n;
+                in = current;
+              }
+            given[t] = in.size();
+            fit[t] = fitter.Fit(in);
+            if (!(options.dark_outlier_ratio > 0)) continue;
+            for (int round = 0; round < options.dark_outlier_rounds; ++round) {
+              const size_t n = RemoveDarkOutliers(in, fit[t].params, options, kept);
+              if (n == 0) break;
+              removed[t] += n;
+              current.swap(kept);
+              in = current;
+              fit[t] = fitter.Fit(in);
+            }
+          }
+        });
+    });
     report.seconds_fit += Since(t0);
 
     for (size_t t = 0; t < part.size(); ++t) {
       const int x = static_cast<int>(part[t] % static_cast<uint32_t>(canvas.width())) - region.x;
       const int y = static_cast<int>(part[t] / static_cast<uint32_t>(canvas.width())) - region.y;
-      if (fit.model[t] == ReflectanceModel::kGgx)
-        maps.SetGgx(x, y, fit.ggx[t]);
+      const TexelFit& f = fit[t];
+      if (f.model == ReflectanceModel::kGgx)
+        maps.SetGgx(x, y, f.ggx);
       else
-        maps.Set(x, y, fit.params[t]);
-      maps.status(x, y) = fit.status[t];
-      const TexelFitStatus st = fit.status[t];
-      if (st != TexelFitStatus::kDiffuseOnly && st != TexelFitStatus::kTooFewSamples &&
-          st != TexelFitStatus::kFailed)
-        ++summary.lobes_by_model[static_cast<size_t>(fit.model[t])];
-      maps.fit_error(x, y) = fit.rms_error[t];
-      ++summary.count_by_status[static_cast<size_t>(fit.status[t])];
-      rms_sum += fit.rms_error[t];
+        maps.Set(x, y, f.params);
+      maps.status(x, y) = f.status;
+      if (f.status != TexelFitStatus::kDiffuseOnly && f.status != TexelFitStatus::kTooFewSamples &&
+          f.status != TexelFitStatus::kFailed)
+        ++summary.lobes_by_model[static_cast<size_t>(f.model)];
+      maps.fit_error(x, y) = f.rms_error;
+      ++summary.count_by_status[static_cast<size_t>(f.status)];
+      rms_sum += f.rms_error;
+      summary.samples_total += given[t];
+      summary.samples_used += static_cast<size_t>(f.samples_used);
+      summary.samples_saturated += static_cast<size_t>(f.samples_saturated);
+      if (f.iterations > 0) {
+        iteration_sum += f.iterations;
+        ++lobe_texels;
+      }
       if (removed[t] > 0) {
         report.dark_outliers += removed[t];
         ++report.texels_refitted;
       }
     }
     summary.texels += part.size();
-    summary.samples_total += fit.summary.samples_total;
-    summary.samples_used += fit.summary.samples_used;
-    summary.samples_saturated += fit.summary.samples_saturated;
-    const size_t tile_lobes = part.size() - fit.summary.count(TexelFitStatus::kDiffuseOnly) -
-                              fit.summary.count(TexelFitStatus::kTooFewSamples);
-    iteration_sum += fit.summary.mean_iterations * static_cast<double>(tile_lobes);
-    lobe_texels += tile_lobes;
     fitted_texels(part.size());
   }
   summary.mean_rms_error = summary.texels ? rms_sum / static_cast<double>(summary.texels) : 0.0;

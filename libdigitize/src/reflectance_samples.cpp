@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -667,26 +668,62 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   }
   // parallel_for added each photo's `local` (whose texels field is 0) under the mutex.
 
-  std::vector<BrdfSample> texel_samples;
-  texel_samples.reserve(n_photos);
-  size_t dropped = 0;
-  for (size_t t = 0; t < n_texels; ++t) {
-    texel_samples.clear();
-    size_t direct = 0, interpolated = 0;
+  // Texel-major assembly, in parallel over blocks of texels: first how many samples each texel
+  // keeps, then each block copies its texels' samples to their places. Within a block every
+  // photo's keep flags and slots are read as one contiguous run (one texel at a time over all
+  // photos was 64 streams a texel apart, and single-threaded: ~40 % of the samples stage).
+  constexpr size_t kBlock = 256;
+  const size_t n_blocks = (n_texels + kBlock - 1) / kBlock;
+  const auto for_blocks = [&](const auto& body) {
+    if (parallel)
+      tbb::parallel_for(size_t{0}, n_blocks, body);
+    else
+      for (size_t k = 0; k < n_blocks; ++k) body(k);
+  };
+  std::vector<uint32_t> count(n_texels);
+  std::vector<uint8_t> least(n_texels);
+  std::vector<size_t> block_dropped(n_blocks, 0);
+  for_blocks([&](size_t k) {
+    const size_t t0 = k * kBlock, n = std::min(kBlock, n_texels - t0);
+    std::array<uint32_t, kBlock> direct{}, interpolated{};
     for (size_t i = 0; i < n_photos; ++i) {
-      direct += keep[i * n_texels + t] == kKeepDirect;
-      interpolated += keep[i * n_texels + t] == kKeepInterpolated;
+      const uint8_t* flags = keep.data() + i * n_texels + t0;
+      for (size_t j = 0; j < n; ++j) {
+        direct[j] += flags[j] == kKeepDirect;
+        interpolated[j] += flags[j] == kKeepInterpolated;
+      }
     }
     // Interpolated samples only where the texel would otherwise have too few (a photo set from
     // one camera position steps over the same texels in every photo).
-    const uint8_t least =
-        direct >= static_cast<size_t>(options.min_direct_samples) ? kKeepDirect : kKeepInterpolated;
-    if (least == kKeepDirect) dropped += interpolated;
-    for (size_t i = 0; i < n_photos; ++i)
-      if (keep[i * n_texels + t] && keep[i * n_texels + t] <= least)
-        texel_samples.push_back(slots[i * n_texels + t]);
-    out.AddTexel(texel_samples);
+    for (size_t j = 0; j < n; ++j) {
+      const bool enough = direct[j] >= static_cast<size_t>(options.min_direct_samples);
+      least[t0 + j] = enough ? kKeepDirect : kKeepInterpolated;
+      count[t0 + j] = direct[j] + (enough ? 0 : interpolated[j]);
+      if (enough) block_dropped[k] += interpolated[j];
+    }
+  });
+  const size_t base = out.samples.size();
+  out.texel_begin.reserve(out.texel_begin.size() + n_texels);
+  size_t total = base;
+  for (size_t t = 0; t < n_texels; ++t) {
+    total += count[t];
+    out.texel_begin.push_back(total);
   }
+  const size_t first_texel = out.texel_begin.size() - 1 - n_texels;
+  out.samples.resize(total);
+  for_blocks([&](size_t k) {
+    const size_t t0 = k * kBlock, n = std::min(kBlock, n_texels - t0);
+    std::array<size_t, kBlock> cursor;
+    for (size_t j = 0; j < n; ++j) cursor[j] = out.texel_begin[first_texel + t0 + j];
+    for (size_t i = 0; i < n_photos; ++i) {
+      const uint8_t* flags = keep.data() + i * n_texels + t0;
+      const BrdfSample* from = slots.data() + i * n_texels + t0;
+      for (size_t j = 0; j < n; ++j)
+        if (flags[j] && flags[j] <= least[t0 + j]) out.samples[cursor[j]++] = from[j];
+    }
+  });
+  size_t dropped = 0;
+  for (const size_t d : block_dropped) dropped += d;
   stats.stepped_over += dropped;
   stats.kept -= dropped;
 }

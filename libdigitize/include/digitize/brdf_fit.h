@@ -110,6 +110,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -250,5 +251,22 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
 
 // One texel; `options` must be valid (checked: throws InvariantError otherwise). Thread-safe.
 TexelFit FitBrdfTexel(std::span<const BrdfSample> samples, const BrdfFitOptions& options);
+
+// Fits texel after texel in one scratch space (FitBrdfTexel allocates one a call), for callers
+// that run their own loop over texels (FitReflectance filters each texel's samples on the way
+// in and refits after, in one pass over them). One per thread; `options` as FitBrdfTexel's.
+class BrdfTexelFitter {
+ public:
+  explicit BrdfTexelFitter(const BrdfFitOptions& options);
+  ~BrdfTexelFitter();
+  BrdfTexelFitter(const BrdfTexelFitter&) = delete;
+  BrdfTexelFitter& operator=(const BrdfTexelFitter&) = delete;
+  TexelFit Fit(std::span<const BrdfSample> samples);
+
+ private:
+  struct Scratch;
+  BrdfFitOptions options_;
+  std::unique_ptr<Scratch> scratch_;
+};
 
 }  // namespace digitize
