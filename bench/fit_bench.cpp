@@ -182,10 +182,12 @@ int main(int argc, char** argv) {
   if (quick) {
     std::printf(
         "whole fit: load %.2f s, samples %.2f s, fit %.2f s, write %.2f s, total %.2f s; "
-        "held-out PSNR %.4f dB\nsamples + fit: %.2f s wall, %.2f s CPU (%.2f cores busy)\n%s\n",
+        "held-out PSNR %.4f dB\nsamples + fit: %.2f s wall, %.2f s CPU (%.2f cores busy); "
+        "%zu dark outliers, %zu texels refitted\n%s\n",
         whole.seconds_load, whole.seconds_samples, whole.seconds_fit, whole.seconds_write,
         whole.seconds_total, whole.psnr_db, fast->report.seconds_total, cpu_fit,
-        cpu_fit / fast->report.seconds_total, whole.brief.c_str());
+        cpu_fit / fast->report.seconds_total, fast->report.dark_outliers,
+        fast->report.texels_refitted, whole.brief.c_str());
     if (keep.empty()) std::filesystem::remove_all(dir);
     return 0;
   }

@@ -36,25 +36,40 @@ std::string Format(const char* fmt, auto... args) {
   return buffer;
 }
 
-// Keeps the samples of a texel that do not lie far below the diffuse floor of `params` (see the
-// header). Returns how many were removed.
+// The samples of `in` far below the diffuse floor `floor_of` gives each (see the header) are
+// left out: when there are any, `out` gets the others. Returns how many. Counted first, so the
+// common texel with none is not copied.
+template <typename FloorOf>
+size_t LeaveOutDark(std::span<const BrdfSample> in, double ratio, double min_gap,
+                    const FloorOf& floor_of, std::vector<BrdfSample>& out) {
+  const auto dark = [&](const BrdfSample& s) {
+    const double floor = floor_of(s);
+    const double seen = s.radiance.sum();
+    return seen < ratio * floor && floor - seen > min_gap;
+  };
+  size_t n = 0;
+  for (const BrdfSample& s : in) n += dark(s);
+  if (n == 0) return 0;
+  out.clear();
+  for (const BrdfSample& s : in)
+    if (!dark(s)) out.push_back(s);
+  return n;
+}
+
+// After a fit: the samples far below the fitted diffuse floor E rho_d of `params`.
 size_t RemoveDarkOutliers(std::span<const BrdfSample> in, const LafortuneParams& params,
                           const ReflectanceFitOptions& o, std::vector<BrdfSample>& out) {
-  out.clear();
   const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
-  for (const BrdfSample& s : in) {
-    const double floor = s.irradiance.cwiseProduct(params.rho_d).sum();
-    const double seen = s.radiance.sum();
-    if (seen < o.dark_outlier_fit_ratio * floor && floor - seen > min_gap) continue;
-    out.push_back(s);
-  }
-  return in.size() - out.size();
+  return LeaveOutDark(
+      in, o.dark_outlier_fit_ratio, min_gap,
+      [&](const BrdfSample& s) -> double { return s.irradiance.cwiseProduct(params.rho_d).sum(); },
+      out);
 }
 
 // Before any fit: the diffuse floor of a texel is estimated as the median apparent reflectance
 // q = sum_c radiance / sum_c E over its samples (the lobe only raises q, and a shadow drops it to
-// ~0, so the median sits at or a little above rho_d whenever most samples are lit). The samples
-// of `in` not far below that floor go to `out`; `q` is scratch. Returns how many were left out.
+// ~0, so the median sits at or a little above rho_d whenever most samples are lit). Samples far
+// below that floor are left out (LeaveOutDark); `q` is scratch.
 size_t PrefilterDarkOutliers(std::span<const BrdfSample> in, const ReflectanceFitOptions& o,
                              std::vector<double>& q, std::vector<BrdfSample>& out) {
   const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
@@ -69,14 +84,9 @@ size_t PrefilterDarkOutliers(std::span<const BrdfSample> in, const ReflectanceFi
     std::nth_element(q.begin(), mid, q.end());
     floor_q = *mid;
   }
-  out.clear();
-  for (const BrdfSample& s : in) {
-    const double floor = floor_q * s.irradiance.sum();
-    const double seen = s.radiance.sum();
-    if (seen < o.dark_outlier_ratio * floor && floor - seen > min_gap) continue;
-    out.push_back(s);
-  }
-  return in.size() - out.size();
+  return LeaveOutDark(
+      in, o.dark_outlier_ratio, min_gap,
+      [&](const BrdfSample& s) { return floor_q * s.irradiance.sum(); }, out);
 }
 
 // Which photos can give samples at all, and how many distinct (light, view) pairs they hold (see
@@ -238,22 +248,20 @@ Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
   double rms_sum = 0, iteration_sum = 0;
   size_t lobe_texels = 0;
   const size_t tile = static_cast<size_t>(options.tile_texels);
-  BrdfSamples samples;
   tbb::task_arena arena(fit_options.num_threads > 0 ? fit_options.num_threads
                                                     : tbb::task_arena::automatic);
   for (size_t begin = 0; begin < texels.size(); begin += tile) {
     const std::span<const uint32_t> part(texels.data() + begin,
                                          std::min(tile, texels.size() - begin));
-    samples.samples.clear();
-    samples.texel_begin.assign(1, 0);
     auto t0 = Clock::now();
-    GatherSamples(scene, part, options.samples, samples, report.samples, true, &buffers);
+    GatherSampleSlots(scene, part, options.samples, report.samples, true, buffers);
     report.seconds_samples += Since(t0);
 
-    // Each texel's samples are read once, in the fit's own parallel loop: filtered on the way in
-    // (PrefilterDarkOutliers), fitted, and refitted without the samples its fit shows dark
-    // (RemoveDarkOutliers). As separate passes over the tile's samples (filter, fit, refit) they
-    // were a tenth of the fit stage, the serial filter most of it.
+    // Each texel's samples are taken from the photo-major slots once, in the fit's own parallel
+    // loop: filtered on the way in (PrefilterDarkOutliers), fitted, and refitted without the
+    // samples its fit shows dark (RemoveDarkOutliers). As separate passes over the tile's samples
+    // (a texel-major copy, filter, fit, refit) they were a fifth of samples + fit, the serial
+    // filter most of it.
     t0 = Clock::now();
     std::vector<TexelFit> fit(part.size());
     std::vector<size_t> removed(part.size(), 0), given(part.size(), 0);
@@ -262,10 +270,12 @@ Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
         tbb::blocked_range<size_t>(0, part.size(), kFitGrain),
         [&](const tbb::blocked_range<size_t>& r) {
           BrdfTexelFitter fitter(fit_options);
+          BrdfSamples gathered;
+          buffers.AppendTexels(r.begin(), r.size(), gathered);
           std::vector<BrdfSample> kept, current;
           std::vector<double> q;
           for (size_t t = r.begin(); t != r.end(); ++t) {
-            std::span<const BrdfSample> in = samples.Texel(t);
+            std::span<const BrdfSample> in = gathered.Texel(t - r.begin());
             if (options.dark_outlier_ratio > 0)
               if (const size_t n = PrefilterDarkOutliers(in, options, q, current); n > 0) {
                 removed[t] += n;

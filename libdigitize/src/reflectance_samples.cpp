@@ -21,6 +21,8 @@ namespace {
 
 // keep[] values of GatherSamples: not kept, kept, kept but interpolated.
 constexpr uint8_t kKeepDirect = 1, kKeepInterpolated = 2;
+// Texels per block of the texel-major passes over the photo-major slots.
+constexpr size_t kTexelBlock = 256;
 
 std::string Count(size_t n) {
   char b[32];
@@ -165,6 +167,25 @@ PixelSample Average(const Photo& photo, const FootprintPixels& f,
   s.rgb /= static_cast<float>(f.count);
   s.seen = f.seen;
   return s;
+}
+
+// The light as a texel's point sees it: the direction towards it (scan frame), the irradiance at
+// normal incidence and the distance (point lights; Light::DirectionTo, IrradianceAt). One square
+// root and one division, where the two calls took 3 divisions each and a second root for the
+// distance: a visible part of the samples' time at 64 photos a texel.
+struct LightAtPoint {
+  Vec3d direction;
+  Vec3f irradiance;
+  float distance;
+};
+LightAtPoint LightAt(const Light& light, const Vec3d& p_scan) {
+  if (light.type == LightType::kDirectional)
+    return {light.direction, light.irradiance, std::numeric_limits<float>::infinity()};
+  const Vec3d d = light.position_mm - p_scan;
+  const double d2 = d.squaredNorm();
+  if (!(d2 > 0)) return {Vec3d::Zero(), Vec3f::Zero(), 0.0f};  // on the light: below any horizon
+  const double inv = 1.0 / std::sqrt(d2);
+  return {d * inv, light.intensity * static_cast<float>(inv * inv), static_cast<float>(d2 * inv)};
 }
 
 // Per texel: surface point (canvas and scan frames) and tangent frame, shared by every photo.
@@ -313,7 +334,8 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
             break;
         }
         const TexelGeometry& g = geometry[t];
-        const Vec3d l_canvas = canvas_rot * light.DirectionTo(g.p_scan);
+        const LightAtPoint light_at = LightAt(light, g.p_scan);
+        const Vec3d l_canvas = canvas_rot * light_at.direction;
         const Vec3d l_local = g.frame.ToLocal(l_canvas);
         if (!(l_local.z() > options.min_cos)) {
           ++local.light_below_horizon;
@@ -329,7 +351,7 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
         s.view_dir = vt.view_local;
         s.light_dir = l_local.cast<float>();
         s.radiance = pixel.rgb;
-        s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
+        s.irradiance = light_at.irradiance * static_cast<float>(l_local.z());
         const uint8_t kept = pixel.stepped_over ? kKeepInterpolated : kKeepDirect;
         if (options.shadow_rays) {
           const Vec3f l = l_canvas.cast<float>();
@@ -338,9 +360,7 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
             ray_keep.push_back(kept);
             origins.push_back(g.p_canvas.cast<float>());
             directions.push_back(l);
-            far.push_back(light.type == LightType::kPoint
-                              ? static_cast<float>((light.position_mm - g.p_scan).norm())
-                              : std::numeric_limits<float>::infinity());
+            far.push_back(light_at.distance);
             continue;
           }
           ++proven;
@@ -507,9 +527,9 @@ Status ValidateSampleScene(const SampleScene& scene) {
   return CheckCamerasSeeCanvas(*scene.photos, scene.canvas_from_scan, canvas);
 }
 
-void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
-                   const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
-                   bool parallel, SampleBuffers* buffers) {
+void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texels,
+                       const SampleOptions& options, SampleStats& stats, bool parallel,
+                       SampleBuffers& b) {
   const HeightField& canvas = *scene.canvas;
   const Grid<Vec3f>& normals = *scene.normals;
   const std::vector<Photo>& photos = scene.photos->photos;
@@ -535,8 +555,8 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
 
   // slot (i, t) holds photo i's sample of texel t when keep[i * n_texels + t]: photo-major, so
   // each photo's task writes one contiguous run (texel-major made every write a cache miss).
-  SampleBuffers local_buffers;
-  SampleBuffers& b = buffers ? *buffers : local_buffers;
+  b.texels = n_texels;
+  b.photos = n_photos;
   // Slots are written before they are read (keep says which): only grow them, never clear.
   if (b.slots.size() < n_texels * n_photos) b.slots.resize(n_texels * n_photos);
   b.keep.assign(n_texels * n_photos, 0);
@@ -579,7 +599,8 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
         ++local.facing_away;
         continue;
       }
-      const Vec3d l_canvas = canvas_rot * light.DirectionTo(g.p_scan);
+      const LightAtPoint light_at = LightAt(light, g.p_scan);
+      const Vec3d l_canvas = canvas_rot * light_at.direction;
       const Vec3d l_local = g.frame.ToLocal(l_canvas);
       if (!(l_local.z() > options.min_cos)) {
         ++local.light_below_horizon;
@@ -597,7 +618,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       s.view_dir = v_local.cast<float>();
       s.light_dir = l_local.cast<float>();
       s.radiance = pixel.rgb;
-      s.irradiance = light.IrradianceAt(g.p_scan) * static_cast<float>(l_local.z());
+      s.irradiance = light_at.irradiance * static_cast<float>(l_local.z());
       candidate.push_back(static_cast<uint32_t>(t));
       seen.push_back(pixel.seen);
       stepped_over.push_back(pixel.stepped_over);
@@ -606,9 +627,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
       light_dirs.push_back(l_canvas.cast<float>());
       view_far.push_back(pinhole ? static_cast<float>((camera_centre_scan - g.p_scan).norm())
                                  : std::numeric_limits<float>::infinity());
-      light_far.push_back(light.type == LightType::kPoint
-                              ? static_cast<float>((light.position_mm - g.p_scan).norm())
-                              : std::numeric_limits<float>::infinity());
+      light_far.push_back(light_at.distance);
     }
     std::vector<uint8_t> hidden(candidate.size(), 0), shadowed(candidate.size(), 0);
     if (options.visibility_rays) {
@@ -668,24 +687,15 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   }
   // parallel_for added each photo's `local` (whose texels field is 0) under the mutex.
 
-  // Texel-major assembly, in parallel over blocks of texels: first how many samples each texel
-  // keeps, then each block copies its texels' samples to their places. Within a block every
-  // photo's keep flags and slots are read as one contiguous run (one texel at a time over all
-  // photos was 64 streams a texel apart, and single-threaded: ~40 % of the samples stage).
-  constexpr size_t kBlock = 256;
-  const size_t n_blocks = (n_texels + kBlock - 1) / kBlock;
-  const auto for_blocks = [&](const auto& body) {
-    if (parallel)
-      tbb::parallel_for(size_t{0}, n_blocks, body);
-    else
-      for (size_t k = 0; k < n_blocks; ++k) body(k);
-  };
-  std::vector<uint32_t> count(n_texels);
-  std::vector<uint8_t> least(n_texels);
+  // What each texel keeps, in parallel over blocks of texels; within a block every photo's keep
+  // flags are read as one contiguous run.
+  const size_t n_blocks = (n_texels + kTexelBlock - 1) / kTexelBlock;
+  b.count.assign(n_texels, 0);
+  b.least.assign(n_texels, kKeepDirect);
   std::vector<size_t> block_dropped(n_blocks, 0);
-  for_blocks([&](size_t k) {
-    const size_t t0 = k * kBlock, n = std::min(kBlock, n_texels - t0);
-    std::array<uint32_t, kBlock> direct{}, interpolated{};
+  const auto per_block = [&](size_t k) {
+    const size_t t0 = k * kTexelBlock, n = std::min(kTexelBlock, n_texels - t0);
+    std::array<uint32_t, kTexelBlock> direct{}, interpolated{};
     for (size_t i = 0; i < n_photos; ++i) {
       const uint8_t* flags = keep.data() + i * n_texels + t0;
       for (size_t j = 0; j < n; ++j) {
@@ -697,35 +707,75 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     // one camera position steps over the same texels in every photo).
     for (size_t j = 0; j < n; ++j) {
       const bool enough = direct[j] >= static_cast<size_t>(options.min_direct_samples);
-      least[t0 + j] = enough ? kKeepDirect : kKeepInterpolated;
-      count[t0 + j] = direct[j] + (enough ? 0 : interpolated[j]);
+      b.least[t0 + j] = enough ? kKeepDirect : kKeepInterpolated;
+      b.count[t0 + j] = direct[j] + (enough ? 0 : interpolated[j]);
       if (enough) block_dropped[k] += interpolated[j];
     }
-  });
-  const size_t base = out.samples.size();
-  out.texel_begin.reserve(out.texel_begin.size() + n_texels);
-  size_t total = base;
-  for (size_t t = 0; t < n_texels; ++t) {
-    total += count[t];
-    out.texel_begin.push_back(total);
-  }
-  const size_t first_texel = out.texel_begin.size() - 1 - n_texels;
-  out.samples.resize(total);
-  for_blocks([&](size_t k) {
-    const size_t t0 = k * kBlock, n = std::min(kBlock, n_texels - t0);
-    std::array<size_t, kBlock> cursor;
-    for (size_t j = 0; j < n; ++j) cursor[j] = out.texel_begin[first_texel + t0 + j];
-    for (size_t i = 0; i < n_photos; ++i) {
-      const uint8_t* flags = keep.data() + i * n_texels + t0;
-      const BrdfSample* from = slots.data() + i * n_texels + t0;
-      for (size_t j = 0; j < n; ++j)
-        if (flags[j] && flags[j] <= least[t0 + j]) out.samples[cursor[j]++] = from[j];
-    }
-  });
+  };
+  if (parallel)
+    tbb::parallel_for(size_t{0}, n_blocks, per_block);
+  else
+    for (size_t k = 0; k < n_blocks; ++k) per_block(k);
   size_t dropped = 0;
   for (const size_t d : block_dropped) dropped += d;
   stats.stepped_over += dropped;
   stats.kept -= dropped;
+}
+
+void SampleBuffers::AppendTexels(size_t first, size_t n, BrdfSamples& out) const {
+  DIGITIZE_CHECK(first <= texels && n <= texels - first,
+                 "SampleBuffers::AppendTexels: texels out of range");
+  size_t total = out.samples.size();
+  std::vector<size_t> cursor(n);
+  for (size_t j = 0; j < n; ++j) {
+    cursor[j] = total;
+    total += count[first + j];
+    out.texel_begin.push_back(total);
+  }
+  out.samples.resize(total);
+  for (size_t i = 0; i < photos; ++i) {
+    const uint8_t* flags = keep.data() + i * texels + first;
+    const BrdfSample* from = slots.data() + i * texels + first;
+    for (size_t j = 0; j < n; ++j)
+      if (flags[j] && flags[j] <= least[first + j]) out.samples[cursor[j]++] = from[j];
+  }
+}
+
+void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
+                   const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
+                   bool parallel, SampleBuffers* buffers) {
+  SampleBuffers local_buffers;
+  SampleBuffers& b = buffers ? *buffers : local_buffers;
+  GatherSampleSlots(scene, texels, options, stats, parallel, b);
+  // Texel-major, in parallel over blocks of texels: each block copies its texels' samples to
+  // their places, every photo's slots read as one contiguous run (one texel at a time over all
+  // photos was 64 streams a texel apart, and single-threaded: ~40 % of the samples stage).
+  const size_t n_texels = b.texels, n_photos = b.photos;
+  const size_t n_blocks = (n_texels + kTexelBlock - 1) / kTexelBlock;
+  const size_t base = out.samples.size();
+  out.texel_begin.reserve(out.texel_begin.size() + n_texels);
+  size_t total = base;
+  for (size_t t = 0; t < n_texels; ++t) {
+    total += b.count[t];
+    out.texel_begin.push_back(total);
+  }
+  const size_t first_texel = out.texel_begin.size() - 1 - n_texels;
+  out.samples.resize(total);
+  const auto per_block = [&](size_t k) {
+    const size_t t0 = k * kTexelBlock, n = std::min(kTexelBlock, n_texels - t0);
+    std::array<size_t, kTexelBlock> cursor;
+    for (size_t j = 0; j < n; ++j) cursor[j] = out.texel_begin[first_texel + t0 + j];
+    for (size_t i = 0; i < n_photos; ++i) {
+      const uint8_t* flags = b.keep.data() + i * n_texels + t0;
+      const BrdfSample* from = b.slots.data() + i * n_texels + t0;
+      for (size_t j = 0; j < n; ++j)
+        if (flags[j] && flags[j] <= b.least[t0 + j]) out.samples[cursor[j]++] = from[j];
+    }
+  };
+  if (parallel)
+    tbb::parallel_for(size_t{0}, n_blocks, per_block);
+  else
+    for (size_t k = 0; k < n_blocks; ++k) per_block(k);
 }
 
 }  // namespace digitize

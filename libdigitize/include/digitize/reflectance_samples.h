@@ -129,10 +129,18 @@ struct SampleScene {
 Status ValidateSampleScene(const SampleScene& scene);
 
 // Scratch space GatherSamples can reuse from call to call (a tile of 32 k texels x 64 photos is
-// 100 MB that would otherwise be allocated and initialised per call).
+// 100 MB that would otherwise be allocated and initialised per call), and the samples of its
+// last call photo by photo: slot i * texels + t is photo i's sample of texel t, kept when
+// 0 < keep[i * texels + t] <= least[t]; count[t] such samples.
 struct SampleBuffers {
   std::vector<BrdfSample> slots;
   std::vector<uint8_t> keep;
+  std::vector<uint8_t> least;
+  std::vector<uint32_t> count;
+  size_t texels = 0, photos = 0;
+  // The samples of texels [first, first + n) (in photo order, as GatherSamples lists them),
+  // appended to `out`; every photo's slots of the range are read as one run.
+  void AppendTexels(size_t first, size_t n, BrdfSamples& out) const;
 };
 
 // Samples of `texels` (indices y * width + x, any order, none kOutside), texel by texel in that
@@ -141,5 +149,11 @@ struct SampleBuffers {
 void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
                    const SampleOptions& options, BrdfSamples& out, SampleStats& stats,
                    bool parallel = true, SampleBuffers* buffers = nullptr);
+// GatherSamples without its texel-major copy: the samples stay in `buffers`, photo by photo,
+// for a caller that takes them a few texels at a time (SampleBuffers::AppendTexels; the fit does,
+// so the tile's samples are never written out texel-major and read back).
+void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texels,
+                       const SampleOptions& options, SampleStats& stats, bool parallel,
+                       SampleBuffers& buffers);
 
 }  // namespace digitize
