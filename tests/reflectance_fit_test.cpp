@@ -513,61 +513,62 @@ TEST(ReflectanceSamples, SharedViewsAndHorizonsGiveExactlyThePerPhotoSamples) {
   // Every texel (rows of 8 side by side: the bounds' vector path), and every texel but each
   // fifth (runs of 4: the bounds' one-texel path).
   for (const int skip : {0, 5})
-  for (bool with_maps : {false, true}) {
-    std::vector<uint32_t> texels;
-    for (uint32_t t = 0; t < static_cast<uint32_t>(w * h); ++t)
-      if (skip == 0 || t % skip != 0) texels.push_back(t);
-    const SampleScene scene{&canvas, &normals, RigidTransform{},
-                            &set,    &*tracer, with_maps ? &maps : nullptr};
-    ASSERT_TRUE(ValidateSampleScene(scene).ok());
-    const auto gather = [&](bool share, int sectors, SampleStats& stats) {
-      SampleOptions o;
-      o.share_view_rays = share;
-      o.horizon_sectors = sectors;
-      BrdfSamples samples;
-      GatherSamples(scene, texels, o, samples, stats);
-      return samples;
-    };
-    SampleStats before;
-    const BrdfSamples reference = gather(false, 0, before);
-    // The scene must exercise what is compared: shadows, hidden texels (from the relief and the
-    // frame) and several rejections.
-    EXPECT_GT(before.shadowed, 100u);
-    if (!with_maps) {
-      EXPECT_GT(before.hidden, 10u);
-    }
-    EXPECT_GT(before.facing_away + before.light_below_horizon, 0u);
-    size_t traced_without_horizon = 0;
-    for (int sectors : {0, 4, 16, 32}) {
-      SampleStats stats;
-      const BrdfSamples samples = gather(true, sectors, stats);
-      ASSERT_EQ(samples.texel_begin, reference.texel_begin) << sectors << " " << with_maps;
-      for (size_t k = 0; k < samples.samples.size(); ++k) {
-        const BrdfSample& a = samples.samples[k];
-        const BrdfSample& b = reference.samples[k];
-        ASSERT_TRUE(a.view_dir == b.view_dir && a.light_dir == b.light_dir &&
-                    a.radiance == b.radiance && a.irradiance == b.irradiance)
-            << "sample " << k << ", " << sectors << " sectors, maps " << with_maps;
+    for (bool with_maps : {false, true}) {
+      std::vector<uint32_t> texels;
+      for (uint32_t t = 0; t < static_cast<uint32_t>(w * h); ++t)
+        if (skip == 0 || t % skip != 0) texels.push_back(t);
+      const SampleScene scene{&canvas, &normals, RigidTransform{},
+                              &set,    &*tracer, with_maps ? &maps : nullptr};
+      ASSERT_TRUE(ValidateSampleScene(scene).ok());
+      const auto gather = [&](bool share, int sectors, SampleStats& stats) {
+        SampleOptions o;
+        o.share_view_rays = share;
+        o.horizon_sectors = sectors;
+        BrdfSamples samples;
+        GatherSamples(scene, texels, o, samples, stats);
+        return samples;
+      };
+      SampleStats before;
+      const BrdfSamples reference = gather(false, 0, before);
+      // The scene must exercise what is compared: shadows, hidden texels (from the relief and the
+      // frame) and several rejections.
+      EXPECT_GT(before.shadowed, 100u);
+      if (!with_maps) {
+        EXPECT_GT(before.hidden, 10u);
       }
-      for (const auto& [n, m] :
-           {std::pair{stats.behind_camera, before.behind_camera},
-            std::pair{stats.outside_image, before.outside_image},
-            std::pair{stats.facing_away, before.facing_away},
-            std::pair{stats.light_below_horizon, before.light_below_horizon},
-            std::pair{stats.black, before.black}, std::pair{stats.hidden, before.hidden},
-            std::pair{stats.shadowed, before.shadowed},
-            std::pair{stats.stepped_over, before.stepped_over}, std::pair{stats.kept, before.kept}})
-        EXPECT_EQ(n, m) << sectors << " sectors, maps " << with_maps;
-      EXPECT_EQ(stats.light_rays.rays, before.light_rays.rays);
-      if (sectors == 0) {
-        traced_without_horizon = stats.light_rays.traced;
-      } else {
-        // The horizon proves rays free without the tracer (few here: most texels are within
-        // reach of the block or the frame, under lights 12-32 degrees high).
-        EXPECT_LT(stats.light_rays.traced, traced_without_horizon) << sectors;
+      EXPECT_GT(before.facing_away + before.light_below_horizon, 0u);
+      size_t traced_without_horizon = 0;
+      for (int sectors : {0, 4, 16, 32}) {
+        SampleStats stats;
+        const BrdfSamples samples = gather(true, sectors, stats);
+        ASSERT_EQ(samples.texel_begin, reference.texel_begin) << sectors << " " << with_maps;
+        for (size_t k = 0; k < samples.samples.size(); ++k) {
+          const BrdfSample& a = samples.samples[k];
+          const BrdfSample& b = reference.samples[k];
+          ASSERT_TRUE(a.view_dir == b.view_dir && a.light_dir == b.light_dir &&
+                      a.radiance == b.radiance && a.irradiance == b.irradiance)
+              << "sample " << k << ", " << sectors << " sectors, maps " << with_maps;
+        }
+        for (const auto& [n, m] :
+             {std::pair{stats.behind_camera, before.behind_camera},
+              std::pair{stats.outside_image, before.outside_image},
+              std::pair{stats.facing_away, before.facing_away},
+              std::pair{stats.light_below_horizon, before.light_below_horizon},
+              std::pair{stats.black, before.black}, std::pair{stats.hidden, before.hidden},
+              std::pair{stats.shadowed, before.shadowed},
+              std::pair{stats.stepped_over, before.stepped_over},
+              std::pair{stats.kept, before.kept}})
+          EXPECT_EQ(n, m) << sectors << " sectors, maps " << with_maps;
+        EXPECT_EQ(stats.light_rays.rays, before.light_rays.rays);
+        if (sectors == 0) {
+          traced_without_horizon = stats.light_rays.traced;
+        } else {
+          // The horizon proves rays free without the tracer (few here: most texels are within
+          // reach of the block or the frame, under lights 12-32 degrees high).
+          EXPECT_LT(stats.light_rays.traced, traced_without_horizon) << sectors;
+        }
       }
     }
-  }
 }
 
 TEST(ReflectanceFit, InputErrorsNameTheEntry) {

@@ -265,35 +265,34 @@ Status FitRegion(const SampleScene& scene, const ReflectanceFitOptions& options,
     t0 = Clock::now();
     std::vector<TexelFit> fit(part.size());
     std::vector<size_t> removed(part.size(), 0), given(part.size(), 0);
-    arena.execute([&] {
-      tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, part.size(), kFitGrain),
-        [&](const tbb::blocked_range<size_t>& r) {
-          BrdfTexelFitter fitter(fit_options);
-          BrdfSamples gathered;
-          buffers.AppendTexels(r.begin(), r.size(), gathered);
-          std::vector<BrdfSample> kept, current;
-          std::vector<double> q;
-          for (size_t t = r.begin(); t != r.end(); ++t) {
-            std::span<const BrdfSample> in = gathered.Texel(t - r.begin());
-            if (options.dark_outlier_ratio > 0)
-              if (const size_t n = PrefilterDarkOutliers(in, options, q, current); n > 0) {
-                removed[t] += n;
-                in = current;
-              }
-            given[t] = in.size();
-            fit[t] = fitter.Fit(in);
-            if (!(options.dark_outlier_ratio > 0)) continue;
-            for (int round = 0; round < options.dark_outlier_rounds; ++round) {
-              const size_t n = RemoveDarkOutliers(in, fit[t].params, options, kept);
-              if (n == 0) break;
-              removed[t] += n;
-              current.swap(kept);
-              in = current;
-              fit[t] = fitter.Fit(in);
-            }
+    const auto fit_block = [&](const tbb::blocked_range<size_t>& r) {
+      BrdfTexelFitter fitter(fit_options);
+      BrdfSamples gathered;
+      buffers.AppendTexels(r.begin(), r.size(), gathered);
+      std::vector<BrdfSample> kept, current;
+      std::vector<double> q;
+      for (size_t t = r.begin(); t != r.end(); ++t) {
+        std::span<const BrdfSample> in = gathered.Texel(t - r.begin());
+        if (options.dark_outlier_ratio > 0)
+          if (const size_t n = PrefilterDarkOutliers(in, options, q, current); n > 0) {
+            removed[t] += n;
+            in = current;
           }
-        });
+        given[t] = in.size();
+        fit[t] = fitter.Fit(in);
+        if (!(options.dark_outlier_ratio > 0)) continue;
+        for (int round = 0; round < options.dark_outlier_rounds; ++round) {
+          const size_t n = RemoveDarkOutliers(in, fit[t].params, options, kept);
+          if (n == 0) break;
+          removed[t] += n;
+          current.swap(kept);
+          in = current;
+          fit[t] = fitter.Fit(in);
+        }
+      }
+    };
+    arena.execute([&] {
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, part.size(), kFitGrain), fit_block);
     });
     report.seconds_fit += Since(t0);
 

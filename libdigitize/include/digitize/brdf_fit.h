@@ -43,20 +43,21 @@
 // TWO PATHS, one objective (same samples, init, prior and bounds; they differ only in the solver):
 //   kCeresReference: ceres::Solve on all 9 parameters (rho_d; rho_s as a fraction in [0, 1] of
 //     its energy bound, which turns that bound into a box; cx, cy; log k), one autodiff residual
-//     block per sample, DENSE_QR, Levenberg-Marquardt, bounds. The yardstick: ~350 us of CPU per
+//     block per sample, DENSE_QR, Levenberg-Marquardt, bounds. The yardstick: ~690 us of CPU per
 //     texel of 64 samples here (bench/brdf_fit_bench.cpp).
 //   kFast: variable projection. For a fixed lobe shape (cx, cy, k) the model is linear in
 //     (rho_d,c, rho_s,c) per channel: a 2-unknown bounded least squares, solved exactly in
 //     closed form; only (cx, cy, log k) are optimised, by a small bounded Levenberg-Marquardt
 //     (active set + truncated steps) with the Kaufman-projected Gauss-Newton matrix, the sums
-//     vectorised over blocks of 8 samples in float. ~5 us of CPU per texel, same relighting error.
+//     vectorised over blocks of 8 samples in float. ~5 us of CPU per texel (x86-64-v3 build),
+//     a lower relighting error.
 // Both start from a coarse grid over log k for the mirror lobe (the variable projection makes
 // each grid point a closed-form solve), which is what keeps narrow lobes from being missed.
 // With the GGX candidate too (the default), bench/brdf_fit_bench.cpp at 2 threads, 64 samples,
-// noise 0.002: 15 us of CPU per texel (Lafortune-like texels; 12 us with Lafortune alone) and
-// 18 us (GGX-like texels; 9 us alone) against 1.0 ms and 2.6 ms for kCeresReference, at the
-// same relighting error (GGX texels: RMSE 0.0041 fast, 0.0042 reference; 0.34 with Lafortune
-// alone).
+// noise 0.002 (2026-12-07, x86-64-v3): 9.3 us of CPU per texel (Lafortune-like texels; 5.3 us
+// with Lafortune alone) and 10.9 us (GGX-like texels) against 1.3 ms and 2.8 ms for
+// kCeresReference, at the same relighting error (GGX texels: RMSE 0.0043 fast, 0.0044
+// reference; 0.43 with Lafortune alone).
 //
 // NOISE MODEL. Each residual is weighted by 1 / sigma^2 of its sample and channel:
 //   sigma^2 = noise_sigma^2 + step(L)^2 (1/12 + photo_compression_sigma_codes^2),

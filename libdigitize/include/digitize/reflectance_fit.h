@@ -5,7 +5,8 @@
 //
 // The canvas is processed in tiles of tile_texels texels (row-major runs of the canvas's texels,
 // kOutside ones left out): gather the tile's samples (reflectance_samples.h, parallel over photos),
-// fit them (brdf_fit.h, parallel over texels), write the maps; so memory stays ~tile_texels x
+// fit them (brdf_fit.h, parallel over texels, each block of texels taking its samples from the
+// photo-major gather: no texel-major copy), write the maps; so memory stays ~tile_texels x
 // photos x 48 bytes whatever the canvas size.
 //
 // Unmodelled shadows. Shadows cast by anything but the relief and the frame's boxes (a frame the
