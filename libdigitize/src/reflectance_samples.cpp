@@ -386,6 +386,17 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
   }
 }
 
+// The kept samples of texels [first, first + n) of `b`, texel first + j's written from
+// out[cursor[j]] on (cursor advanced); every photo's slots of the range are read as one run.
+void CopyKept(const SampleBuffers& b, size_t first, size_t n, size_t* cursor, BrdfSample* out) {
+  for (size_t i = 0; i < b.photos; ++i) {
+    const uint8_t* flags = b.keep.data() + i * b.texels + first;
+    const BrdfSample* from = b.slots.data() + i * b.texels + first;
+    for (size_t j = 0; j < n; ++j)
+      if (flags[j] && flags[j] <= b.least[first + j]) out[cursor[j]++] = from[j];
+  }
+}
+
 }  // namespace
 
 PixelTexelMaps MapPixelsToTexels(const PhotoSet& photos, const HeightField& canvas,
@@ -733,12 +744,7 @@ void SampleBuffers::AppendTexels(size_t first, size_t n, BrdfSamples& out) const
     out.texel_begin.push_back(total);
   }
   out.samples.resize(total);
-  for (size_t i = 0; i < photos; ++i) {
-    const uint8_t* flags = keep.data() + i * texels + first;
-    const BrdfSample* from = slots.data() + i * texels + first;
-    for (size_t j = 0; j < n; ++j)
-      if (flags[j] && flags[j] <= least[first + j]) out.samples[cursor[j]++] = from[j];
-  }
+  CopyKept(*this, first, n, cursor.data(), out.samples.data());
 }
 
 void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
@@ -750,7 +756,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   // Texel-major, in parallel over blocks of texels: each block copies its texels' samples to
   // their places, every photo's slots read as one contiguous run (one texel at a time over all
   // photos was 64 streams a texel apart, and single-threaded: ~40 % of the samples stage).
-  const size_t n_texels = b.texels, n_photos = b.photos;
+  const size_t n_texels = b.texels;
   const size_t n_blocks = (n_texels + kTexelBlock - 1) / kTexelBlock;
   const size_t base = out.samples.size();
   out.texel_begin.reserve(out.texel_begin.size() + n_texels);
@@ -765,12 +771,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
     const size_t t0 = k * kTexelBlock, n = std::min(kTexelBlock, n_texels - t0);
     std::array<size_t, kTexelBlock> cursor;
     for (size_t j = 0; j < n; ++j) cursor[j] = out.texel_begin[first_texel + t0 + j];
-    for (size_t i = 0; i < n_photos; ++i) {
-      const uint8_t* flags = b.keep.data() + i * n_texels + t0;
-      const BrdfSample* from = b.slots.data() + i * n_texels + t0;
-      for (size_t j = 0; j < n; ++j)
-        if (flags[j] && flags[j] <= b.least[t0 + j]) out.samples[cursor[j]++] = from[j];
-    }
+    CopyKept(b, t0, n, cursor.data(), out.samples.data());
   };
   if (parallel)
     tbb::parallel_for(size_t{0}, n_blocks, per_block);
