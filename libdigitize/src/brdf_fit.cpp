@@ -438,9 +438,9 @@ Result<BrdfFitResult> FitBrdf(const BrdfSamples& samples, const BrdfFitOptions& 
   size_t last_reported = 0;
   ReportProgress(progress, "fit", 0.0);
   const auto body = [&](const tbb::blocked_range<size_t>& range) {
-    Workspace ws;
+    BrdfTexelFitter fitter(options);
     for (size_t t = range.begin(); t != range.end(); ++t) {
-      const TexelFit fit = FitTexel(samples.Texel(t), options, ws);
+      const TexelFit fit = fitter.Fit(samples.Texel(t));
       result.params[t] = fit.params;
       result.model[t] = fit.model;
       result.ggx[t] = fit.ggx;

@@ -21,7 +21,7 @@ namespace {
 
 // keep[] values of GatherSamples: not kept, kept, kept but interpolated.
 constexpr uint8_t kKeepDirect = 1, kKeepInterpolated = 2;
-// Texels per block of the texel-major passes over the photo-major slots.
+// Texels per block of the pass that counts what each texel keeps over the photo-major flags.
 constexpr size_t kTexelBlock = 256;
 
 std::string Count(size_t n) {
@@ -167,25 +167,6 @@ PixelSample Average(const Photo& photo, const FootprintPixels& f,
   s.rgb /= static_cast<float>(f.count);
   s.seen = f.seen;
   return s;
-}
-
-// The light as a texel's point sees it: the direction towards it (scan frame), the irradiance at
-// normal incidence and the distance (point lights; Light::DirectionTo, IrradianceAt). One square
-// root and one division, where the two calls took 3 divisions each and a second root for the
-// distance: a visible part of the samples' time at 64 photos a texel.
-struct LightAtPoint {
-  Vec3d direction;
-  Vec3f irradiance;
-  float distance;
-};
-LightAtPoint LightAt(const Light& light, const Vec3d& p_scan) {
-  if (light.type == LightType::kDirectional)
-    return {light.direction, light.irradiance, std::numeric_limits<float>::infinity()};
-  const Vec3d d = light.position_mm - p_scan;
-  const double d2 = d.squaredNorm();
-  if (!(d2 > 0)) return {Vec3d::Zero(), Vec3f::Zero(), 0.0f};  // on the light: below any horizon
-  const double inv = 1.0 / std::sqrt(d2);
-  return {d * inv, light.intensity * static_cast<float>(inv * inv), static_cast<float>(d2 * inv)};
 }
 
 // Per texel: surface point (canvas and scan frames) and tangent frame, shared by every photo.
@@ -334,7 +315,7 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
             break;
         }
         const TexelGeometry& g = geometry[t];
-        const LightAtPoint light_at = LightAt(light, g.p_scan);
+        const Light::AtPoint light_at = light.At(g.p_scan);
         const Vec3d l_canvas = canvas_rot * light_at.direction;
         const Vec3d l_local = g.frame.ToLocal(l_canvas);
         if (!(l_local.z() > options.min_cos)) {
@@ -383,17 +364,6 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
       std::lock_guard lock(stats_mutex);
       stats += local;
     });
-  }
-}
-
-// The kept samples of texels [first, first + n) of `b`, texel first + j's written from
-// out[cursor[j]] on (cursor advanced); every photo's slots of the range are read as one run.
-void CopyKept(const SampleBuffers& b, size_t first, size_t n, size_t* cursor, BrdfSample* out) {
-  for (size_t i = 0; i < b.photos; ++i) {
-    const uint8_t* flags = b.keep.data() + i * b.texels + first;
-    const BrdfSample* from = b.slots.data() + i * b.texels + first;
-    for (size_t j = 0; j < n; ++j)
-      if (flags[j] && flags[j] <= b.least[first + j]) out[cursor[j]++] = from[j];
   }
 }
 
@@ -610,7 +580,7 @@ void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texel
         ++local.facing_away;
         continue;
       }
-      const LightAtPoint light_at = LightAt(light, g.p_scan);
+      const Light::AtPoint light_at = light.At(g.p_scan);
       const Vec3d l_canvas = canvas_rot * light_at.direction;
       const Vec3d l_local = g.frame.ToLocal(l_canvas);
       if (!(l_local.z() > options.min_cos)) {
@@ -744,7 +714,12 @@ void SampleBuffers::AppendTexels(size_t first, size_t n, BrdfSamples& out) const
     out.texel_begin.push_back(total);
   }
   out.samples.resize(total);
-  CopyKept(*this, first, n, cursor.data(), out.samples.data());
+  for (size_t i = 0; i < photos; ++i) {
+    const uint8_t* flags = keep.data() + i * texels + first;
+    const BrdfSample* from = slots.data() + i * texels + first;
+    for (size_t j = 0; j < n; ++j)
+      if (flags[j] && flags[j] <= least[first + j]) out.samples[cursor[j]++] = from[j];
+  }
 }
 
 void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
@@ -753,30 +728,7 @@ void GatherSamples(const SampleScene& scene, std::span<const uint32_t> texels,
   SampleBuffers local_buffers;
   SampleBuffers& b = buffers ? *buffers : local_buffers;
   GatherSampleSlots(scene, texels, options, stats, parallel, b);
-  // Texel-major, in parallel over blocks of texels: each block copies its texels' samples to
-  // their places, every photo's slots read as one contiguous run (one texel at a time over all
-  // photos was 64 streams a texel apart, and single-threaded: ~40 % of the samples stage).
-  const size_t n_texels = b.texels;
-  const size_t n_blocks = (n_texels + kTexelBlock - 1) / kTexelBlock;
-  const size_t base = out.samples.size();
-  out.texel_begin.reserve(out.texel_begin.size() + n_texels);
-  size_t total = base;
-  for (size_t t = 0; t < n_texels; ++t) {
-    total += b.count[t];
-    out.texel_begin.push_back(total);
-  }
-  const size_t first_texel = out.texel_begin.size() - 1 - n_texels;
-  out.samples.resize(total);
-  const auto per_block = [&](size_t k) {
-    const size_t t0 = k * kTexelBlock, n = std::min(kTexelBlock, n_texels - t0);
-    std::array<size_t, kTexelBlock> cursor;
-    for (size_t j = 0; j < n; ++j) cursor[j] = out.texel_begin[first_texel + t0 + j];
-    CopyKept(b, t0, n, cursor.data(), out.samples.data());
-  };
-  if (parallel)
-    tbb::parallel_for(size_t{0}, n_blocks, per_block);
-  else
-    for (size_t k = 0; k < n_blocks; ++k) per_block(k);
+  b.AppendTexels(0, b.texels, out);
 }
 
 }  // namespace digitize
