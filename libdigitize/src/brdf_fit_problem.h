@@ -299,13 +299,11 @@ class TexelProblem {
     const float d_scale = a2 / static_cast<float>(kPi);
     const float *nh2 = Slot(kNh2), *m5 = Slot(kM5), *nv = Slot(kNv), *nl = Slot(kNl);
     float *u_ptr = Slot(kU), *o_ptr = Slot(kO);
-    // One pass for u, o and every channel's sums: an Eigen expression per sum was 15 passes of a
-    // few blocks each, whose setup and tails cost more than the arithmetic (measured).
+    // A pass for u and o, then a pass per channel for its five sums: an Eigen expression per sum
+    // was 15 passes of a few blocks each, whose setup and tails cost more than the arithmetic
+    // (measured).
     // Per channel, with the target r = L - e o: s1 = sum e^2 u, s2 = sum e^2 u^2,
     // p0 = sum e r, p1 = sum e r u, ll = sum r^2.
-    std::array<std::array<Block, 5>, 3> acc;
-    for (auto& channel : acc)
-      for (Block& x : channel) x.setZero();
     for (int i = 0; i < np_; i += kBlock) {
       // q = D G1(v) G1(l) / (4 n.v n.l) with G1(x) = 2 x / (x + S(x)), S(x) = sqrt(a2 + (1 -
       // a2) x^2): the 2 n.v 2 n.l cancel the 4 n.v n.l, which leaves one division per sample.
@@ -313,30 +311,35 @@ class TexelProblem {
       const Block den = (a2 - 1.0f) * Block::Map(nh2 + i) + 1.0f;  // D's denominator
       const Block q = d_scale / (den.square() * (v + (a2 + one_minus_a2 * v.square()).sqrt()) *
                                  (l + (a2 + one_minus_a2 * l.square()).sqrt()));
-      const Block m = Block::Map(m5 + i), u = q * (1.0f - m), o = q * m;
-      Block::Map(u_ptr + i) = u;
-      Block::Map(o_ptr + i) = o;
-      // Padded samples have e = L = 0: their u, o are finite and contribute nothing.
-      for (int c = 0; c < 3; ++c) {
-        const Block e = Block::Map(Slot(kE + c) + i);
-        const Block r = Block::Map(Slot(kL + c) + i) - e * o, er = e * r;
-        const Block e2u = Block::Map(Slot(kE2 + c) + i) * u;
-        acc[c][0] += e2u;
-        acc[c][1] += e2u * u;
-        acc[c][2] += er;
-        acc[c][3] += er * u;
-        acc[c][4] += r.square();
-      }
+      const Block m = Block::Map(m5 + i);
+      Block::Map(u_ptr + i) = q * (1.0f - m);
+      Block::Map(o_ptr + i) = q * m;
     }
     LinearFit fit;
     double sse = 0;
     for (int c = 0; c < 3; ++c) {
+      // A pass per channel: its five sums stay in registers (all fifteen in one pass spilled).
+      std::array<Block, 5> acc;
+      for (Block& x : acc) x.setZero();
+      const float *e_ptr = Slot(kE + c), *l_ptr = Slot(kL + c), *e2_ptr = Slot(kE2 + c);
+      for (int i = 0; i < np_; i += kBlock) {
+        // Padded samples have e = L = 0: their u, o are finite and contribute nothing.
+        const Block u = Block::Map(u_ptr + i), o = Block::Map(o_ptr + i);
+        const Block e = Block::Map(e_ptr + i);
+        const Block r = Block::Map(l_ptr + i) - e * o, er = e * r;
+        const Block e2u = Block::Map(e2_ptr + i) * u;
+        acc[0] += e2u;
+        acc[1] += e2u * u;
+        acc[2] += er;
+        acc[3] += er * u;
+        acc[4] += r.square();
+      }
       ChannelSums m = sums_[c];
-      m.s1 = acc[c][0].sum();
-      m.s2 = acc[c][1].sum();
-      m.p0 = acc[c][2].sum();
-      m.p1 = acc[c][3].sum();
-      m.ll = acc[c][4].sum();
+      m.s1 = acc[0].sum();
+      m.s2 = acc[1].sum();
+      m.p0 = acc[2].sum();
+      m.p1 = acc[3].sum();
+      m.ll = acc[4].sum();
       fit.channel[c] = SolveChannel(m, 1.0);
       sse += m.ll + QuadraticCost(m, fit.channel[c].a, fit.channel[c].b);
       if (sums_out) (*sums_out)[c] = m;
