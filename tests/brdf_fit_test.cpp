@@ -23,6 +23,7 @@
 
 #include "brdf_fit_problem.h"
 #include "digitize/lafortune.h"
+#include "select_kth.h"
 #include "test_paths.h"
 
 namespace digitize {
@@ -192,6 +193,25 @@ struct RecoveryCase {
 // sample, float), against the scalar reference (double pow): the weight scales every residual,
 // so a relative error of 1e-5 moves a fit's parameters far less than the noise does; toe, knee,
 // clamped (< 0, > 1) and mid-range values.
+// The prefilter's median: every rank of small sets with many ties (values drawn from a few
+// levels, as a texel's lit samples of one paint are) equals std::nth_element's.
+TEST(SelectKth, EveryRankEqualsNthElement) {
+  std::mt19937 rng(7);
+  for (size_t n = 1; n <= 70; ++n) {
+    for (int levels : {1, 3, 1000}) {
+      std::uniform_int_distribution<int> level(0, levels - 1);
+      std::vector<double> values(n);
+      for (double& v : values) v = 0.25 * level(rng);
+      for (size_t k = 0; k < n; ++k) {
+        std::vector<double> a = values, b(n), c(n), ref = values;
+        std::nth_element(ref.begin(), ref.begin() + static_cast<std::ptrdiff_t>(k), ref.end());
+        ASSERT_EQ(SelectKth(a.data(), b.data(), c.data(), n, k), ref[k])
+            << "n " << n << ", k " << k << ", levels " << levels;
+      }
+    }
+  }
+}
+
 TEST(BrdfFit, VectorisedQuantisationWeightsMatchTheReference) {
   using brdf_detail::TexelProblem;
   std::vector<float> x = {-0.5f, 0.0f, 1e-6f, 0.003f, 0.0031308f, 0.00314f,

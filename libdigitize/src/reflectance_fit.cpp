@@ -17,6 +17,7 @@
 #include "digitize/image_io.h"
 #include "digitize/relight.h"
 #include "options_json.h"
+#include "select_kth.h"
 
 namespace digitize {
 namespace {
@@ -73,17 +74,14 @@ size_t RemoveDarkOutliers(std::span<const BrdfSample> in, const LafortuneParams&
 size_t PrefilterDarkOutliers(std::span<const BrdfSample> in, const ReflectanceFitOptions& o,
                              std::vector<double>& q, std::vector<BrdfSample>& out) {
   const double min_gap = o.dark_outlier_sigmas * o.fit.noise_sigma * std::sqrt(3.0);
-  q.clear();
+  const size_t n = in.size();
+  q.resize(3 * n);
+  size_t m = 0;
   for (const BrdfSample& s : in) {
     const double irradiance = s.irradiance.sum();
-    if (irradiance > 0) q.push_back(s.radiance.sum() / irradiance);
+    if (irradiance > 0) q[m++] = s.radiance.sum() / irradiance;
   }
-  double floor_q = 0;
-  if (q.size() >= 3) {
-    const auto mid = q.begin() + static_cast<std::ptrdiff_t>(q.size() / 2);
-    std::nth_element(q.begin(), mid, q.end());
-    floor_q = *mid;
-  }
+  const double floor_q = m >= 3 ? SelectKth(q.data(), q.data() + n, q.data() + 2 * n, m, m / 2) : 0;
   return LeaveOutDark(
       in, o.dark_outlier_ratio, min_gap,
       [&](const BrdfSample& s) { return floor_q * s.irradiance.sum(); }, out);
