@@ -527,6 +527,46 @@ TEST(BrdfFit, NonFiniteSamplesAreFilteredOut) {
   }
 }
 
+// Directions of other lengths are normalised, among samples the fit drops (a direction that
+// normalises to below the surface, a saturated one) and keeps: the same fit as from the unit
+// directions. Scaling by a power of two is exact, so normalising gives back the unit vectors to
+// a rounding or two; the tolerance is a few float roundings of the fitted parameters.
+TEST(BrdfFit, DirectionsOfAnyLengthAreNormalised) {
+  const LafortuneParams truth = Params({0.1f, 0.1f, 0.1f}, {0.5f, 0.5f, 0.5f}, -1, -1, 10);
+  std::mt19937 rng(113);
+  const std::vector<BrdfSample> clean = Render(FromParams(truth), DomeRig(4, 16), kNoise, rng);
+  std::vector<BrdfSample> scaled;
+  for (size_t i = 0; i < clean.size(); ++i) {
+    BrdfSample s = clean[i];
+    if (i % 3 == 0) s.view_dir *= 4.0f;
+    if (i % 5 == 1) s.light_dir *= 0.25f;
+    scaled.push_back(s);
+    if (i == 7) {  // z so small next to x that it normalises to 0: below the surface
+      BrdfSample flat = clean[i];
+      flat.view_dir = Vec3f(3e30f, 0.0f, 1e-30f);
+      scaled.push_back(flat);
+    }
+    if (i == 11) {  // a saturated one with long directions: counted as saturated
+      BrdfSample bright = clean[i];
+      bright.view_dir *= 2.0f;
+      bright.radiance.setConstant(10.0f);
+      scaled.push_back(bright);
+    }
+  }
+  BrdfFitOptions options = Options(BrdfFitMethod::kFast, kNoise);
+  options.saturation_radiance = 5.0;
+  const TexelFit a = FitBrdfTexel(clean, options), b = FitBrdfTexel(scaled, options);
+  EXPECT_EQ(b.samples_used, static_cast<int>(clean.size()));
+  EXPECT_EQ(b.samples_saturated, 1);
+  EXPECT_EQ(a.status, b.status);
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(a.params.rho_d[c], b.params.rho_d[c], 1e-5f * a.params.rho_d[c]);
+    EXPECT_NEAR(a.params.rho_s[c], b.params.rho_s[c], 1e-4f * a.params.rho_s[c]);
+  }
+  EXPECT_NEAR(a.params.k, b.params.k, 1e-4f * a.params.k);
+  ExpectFinite(b);
+}
+
 TEST(BrdfFit, MeasuredPaintIsApproximated) {
   // Ground truth the one-lobe model cannot match: Lafortune et al.'s 3-lobe fits of measured
   // paints and felt (per-channel lobe shapes, retro-reflection). The fit must stay finite, beat
