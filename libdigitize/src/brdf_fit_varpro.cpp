@@ -287,10 +287,15 @@ GgxFitOutcome FitGgxVarPro(TexelProblem& problem, const GgxStart& start,
                            const BrdfFitOptions& options) {
   constexpr double kGgxTolerance = 2e-4;  // in log alpha: alpha within 0.02 %
   constexpr double kGolden = 0.3819660112501051;
-  const auto cost = [&](double t) { return problem.GgxSse(problem.SolveGgx(std::exp(t))); };
+  LinearFit last, at_x;  // the linear part of the last evaluation, and of x
+  const auto cost = [&](double t) {
+    last = problem.SolveGgx(std::exp(t));
+    return problem.GgxSse(last);
+  };
   double a = start.bracket_lo, b = start.bracket_hi;
   double x = std::clamp(start.t, a, b), w = x, v = x;
   double fx = cost(x), fw = fx, fv = fx;
+  at_x = last;
   double d = 0, e = 0;
   // Inside the grid the bracket ends are the grid's neighbours of x: Brent's two other points,
   // so its first step is the grid's parabola, not a golden section (a step of the bracket's
@@ -337,6 +342,7 @@ GgxFitOutcome FitGgxVarPro(TexelProblem& problem, const GgxStart& start,
     if (fu <= fx) {
       (u < x ? b : a) = x;
       v = w, fv = fw, w = x, fw = fx, x = u, fx = fu;
+      at_x = last;
     } else {
       (u < x ? a : b) = u;
       if (fu <= fw || w == x) {
@@ -347,8 +353,15 @@ GgxFitOutcome FitGgxVarPro(TexelProblem& problem, const GgxStart& start,
     }
   }
   out.t = std::clamp(x, start.t_lo, start.t_hi);
-  out.linear = problem.SolveGgx(std::exp(out.t));
-  out.sse = problem.GgxSse(out.linear);
+  // x was evaluated: its fit and error as they came, not a 22nd evaluation. The problem's arrays
+  // hold the last evaluation's u and o; FitTexel sets them again for the alpha it keeps.
+  if (out.t == x) {
+    out.linear = at_x;
+    out.sse = fx;
+  } else {
+    out.linear = problem.SolveGgx(std::exp(out.t));
+    out.sse = problem.GgxSse(out.linear);
+  }
   out.iterations = it;
   return out;
 }
