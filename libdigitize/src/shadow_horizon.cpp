@@ -92,6 +92,7 @@ HorizonBounds::HorizonBounds(const HeightField& canvas, std::span<const uint32_t
   DIGITIZE_CHECK(sectors >= 1 && sectors <= kMaxHorizonSectors,
                  "HorizonBounds: sectors must be in [1, 32], got " + std::to_string(sectors));
   bound_.assign(texels.size() * static_cast<size_t>(sectors), kAlwaysTrace);
+  highest_.assign(texels.size(), 0.0f);
   if (texels.empty()) return;
   const int w = canvas.width(), h = canvas.height();
   const Grid<float>& z = canvas.height_mm;
@@ -225,8 +226,9 @@ HorizonBounds::HorizonBounds(const HeightField& canvas, std::span<const uint32_t
                   slope = std::max(slope, rise * c / edge[static_cast<size_t>(e)] * inv_pitch);
                 }
               }
-              bound_[t * static_cast<size_t>(sectors) + static_cast<size_t>(k)] =
-                  static_cast<float>(std::min<double>(slope, kAlwaysTrace));
+              const float bound = static_cast<float>(std::min<double>(slope, kAlwaysTrace));
+              bound_[t * static_cast<size_t>(sectors) + static_cast<size_t>(k)] = bound;
+              highest_[t] = std::max(highest_[t], bound);
             }
           }
         }

@@ -49,11 +49,16 @@ class HorizonBounds {
   bool ProvenFree(size_t t, const Vec3f& d) const {
     if (!(d.z() > 0.0f)) return false;
     if (d.x() == 0.0f && d.y() == 0.0f) return true;  // straight up: above everything
+    // d.z > b |d_xy|, squared (both sides >= 0). First with the texel's highest bound over all
+    // sectors: most rays clear it, and the sector (a division) is then not needed; where they
+    // clear it, they clear their own sector's, so the answer is the same.
+    const float z2 = d.z() * d.z(), xy2 = d.x() * d.x() + d.y() * d.y();
+    const float highest = highest_[t] * (1 + kRelMargin) + kAbsMargin;
+    if (z2 > highest * highest * xy2) return true;
     const float b =
         bound_[t * static_cast<size_t>(sectors_) + Sector(d.x(), d.y())] * (1 + kRelMargin) +
         kAbsMargin;
-    // d.z > b |d_xy|, squared (both sides >= 0).
-    return d.z() * d.z() > b * b * (d.x() * d.x() + d.y() * d.y());
+    return z2 > b * b * xy2;
   }
 
  private:
@@ -66,8 +71,9 @@ class HorizonBounds {
   }
   static constexpr float kRelMargin = 1e-4f, kAbsMargin = 1e-6f;
   int sectors_;
-  float sector_scale_;        // sectors / 4
-  std::vector<float> bound_;  // texel-major: sectors_ slopes (tan) per texel
+  float sector_scale_;          // sectors / 4
+  std::vector<float> bound_;    // texel-major: sectors_ slopes (tan) per texel
+  std::vector<float> highest_;  // per texel, the largest of its sectors' bounds
 };
 
 }  // namespace digitize
