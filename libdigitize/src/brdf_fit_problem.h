@@ -445,15 +445,10 @@ class TexelProblem {
 
  private:
   // Load's tests, per sample: verdict 0 unusable, 1 usable, 2 usable but saturated, 3 or 4: 1 or
-  // 2 once its directions are normalised. Returns the count of 1s; *unit the count of 1s and 2s.
-  static int Verdicts(int count, float* const col[12], float saturation, float* verdict,
-                      int* unit) {
-    return Verdicts(count, col[0], col[1], col[2], col[3], col[4], col[5], col[6], col[7], col[8],
-                    col[9], col[10], col[11], saturation, verdict, unit);
-  }
-  // The arrays as restrict parameters, flags as int and the tests folded into a few comparisons:
-  // otherwise GCC 12 does not vectorise the loop (restrict locals, bool flags and a nested ?:
-  // each stopped it).
+  // 2 once its directions are normalised. Returns the count of 1s; *unit_out the count of 1s and
+  // 2s. The arrays as restrict parameters, flags as int and the tests folded into a few
+  // comparisons: otherwise GCC 12 does not vectorise the loop (restrict locals, bool flags and a
+  // nested ?: each stopped it).
   static int Verdicts(int count, const float* __restrict vx, const float* __restrict vy,
                       const float* __restrict vz, const float* __restrict lx,
                       const float* __restrict ly, const float* __restrict lz,
@@ -514,7 +509,9 @@ class TexelProblem {
     }
     float* verdict = Slot(kTmp);
     int unit = 0;
-    const int usable = Verdicts(count, col, saturation, verdict, &unit);
+    const int usable =
+        Verdicts(count, col[0], col[1], col[2], col[3], col[4], col[5], col[6], col[7], col[8],
+                 col[9], col[10], col[11], saturation, verdict, &unit);
     n_ = usable;
     saturated_ = unit - usable;
     if (usable == count) return;  // the common texel: every sample usable as it is

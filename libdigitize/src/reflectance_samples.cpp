@@ -182,7 +182,8 @@ struct TexelGeometry {
 // texel (64 M times for 1 Mtexel x 64 photos); in double, with a root, a division and two
 // rotations each, the gather took 0.25 s more of its 2.1 s on fit_bench (measured). Positions are
 // relative to the canvas's centre, so float keeps them to ~1e-7 of the canvas's size: directions
-// agree with Light::At to float rounding, which is what a BrdfSample stores.
+// and irradiance agree with Light::DirectionTo and IrradianceAt to float rounding, which is what
+// a BrdfSample stores.
 class TileLight {
  public:
   TileLight(const Light& light, const Vec3d& centre)
@@ -225,8 +226,8 @@ struct ViewTexel {
 // keep exactly as the per-photo path does (reflectance_fit_test compares them).
 void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
                    const SampleOptions& options, const std::vector<TexelGeometry>& geometry,
-                   const Vec3d& centre, std::vector<BrdfSample>& slots, std::vector<uint8_t>& keep,
-                   SampleStats& stats, bool parallel) {
+                   const Vec3d& canvas_centre, std::vector<BrdfSample>& slots,
+                   std::vector<uint8_t>& keep, SampleStats& stats, bool parallel) {
   const std::vector<Photo>& photos = scene.photos->photos;
   const size_t n_texels = texels.size(), n_photos = photos.size();
   const RigidTransform scan_from_canvas = scene.canvas_from_scan.Inverse();
@@ -326,7 +327,7 @@ void GatherPerView(const SampleScene& scene, std::span<const uint32_t> texels,
     for_each(of_view.size(), [&](size_t v) {
       const size_t i = of_view[v];
       const Photo& photo = photos[i];
-      const TileLight light(photo.light, centre);
+      const TileLight light(photo.light, canvas_centre);
       SampleStats local;
       local.candidates = n_texels;
       std::vector<uint32_t> ray_of;  // texel of each shadow ray
@@ -557,6 +558,9 @@ void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texel
   const Vec3d texel_step_x = scan_from_canvas.rotation * Vec3d(canvas.pitch_mm, 0, 0);
   const Vec3d texel_step_y = scan_from_canvas.rotation * Vec3d(0, -canvas.pitch_mm, 0);
 
+  // The canvas's centre, not the tile's: a texel's sample must not depend on the tiling.
+  const Vec3d canvas_centre =
+      scan_from_canvas.Apply(Vec3d(canvas.extent_mm().x() / 2, canvas.extent_mm().y() / 2, 0));
   std::vector<TexelGeometry> geometry(n_texels);
   for (size_t t = 0; t < n_texels; ++t) {
     const int x = static_cast<int>(texels[t] % static_cast<uint32_t>(width));
@@ -565,19 +569,15 @@ void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texel
                    "GatherSamples: texel outside the canvas");
     const Eigen::Vector2d xy = canvas.TexelCentreMm(x, y);
     geometry[t].p_canvas = {xy.x(), xy.y(), canvas.height_mm(x, y)};
-    geometry[t].p_scan = scan_from_canvas.Apply(geometry[t].p_canvas);
-    geometry[t].frame = MakeTangentFrame(normals(x, y).cast<double>());
-  }
-  // The canvas's centre, not the tile's: a texel's sample must not depend on the tiling.
-  const Vec3d centre =
-      scan_from_canvas.Apply(Vec3d(canvas.extent_mm().x() / 2, canvas.extent_mm().y() / 2, 0));
-  for (TexelGeometry& g : geometry) {
+    TexelGeometry& g = geometry[t];
+    g.p_scan = scan_from_canvas.Apply(g.p_canvas);
+    g.frame = MakeTangentFrame(normals(x, y).cast<double>());
     Mat3d local;
     local.row(0) = g.frame.x.transpose() * canvas_rot;
     local.row(1) = g.frame.y.transpose() * canvas_rot;
     local.row(2) = g.frame.z.transpose() * canvas_rot;
     g.local_from_scan = local.cast<float>();
-    g.p_centred = (g.p_scan - centre).cast<float>();
+    g.p_centred = (g.p_scan - canvas_centre).cast<float>();
   }
 
   // slot (i, t) holds photo i's sample of texel t when keep[i * n_texels + t]: photo-major, so
@@ -595,7 +595,7 @@ void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texel
   const auto per_photo = [&](size_t i) {
     const Photo& photo = photos[i];
     const Camera& camera = photo.camera;
-    const TileLight light(photo.light, centre);
+    const TileLight light(photo.light, canvas_centre);
     const bool pinhole = camera.model == CameraModel::kPinhole;
     const Vec3d camera_centre_scan = camera.CentreInScan();
     const Grid<uint32_t>* owner =
@@ -709,7 +709,7 @@ void GatherSampleSlots(const SampleScene& scene, std::span<const uint32_t> texel
     else
       for (size_t i = 0; i < n_photos; ++i) per_photo(i);
   } else {
-    GatherPerView(scene, texels, options, geometry, centre, slots, keep, stats, parallel);
+    GatherPerView(scene, texels, options, geometry, canvas_centre, slots, keep, stats, parallel);
   }
   // parallel_for added each photo's `local` (whose texels field is 0) under the mutex.
 

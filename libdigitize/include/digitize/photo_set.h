@@ -29,7 +29,6 @@
 // is kept (it is a lower bound of the true radiance) and the fit must reject it.
 #pragma once
 
-#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <limits>
@@ -165,25 +164,6 @@ struct Light {
     if (type == LightType::kDirectional) return irradiance;
     return intensity / static_cast<float>((position_mm - p_scan).squaredNorm());
   }
-  // Both of the above and the distance to the light (infinite for a directional light) from one
-  // square root and one division, for loops over many points (the two calls take six divisions
-  // and the distance a second root). Equal to them up to float rounding; a point on the light
-  // gets a zero direction and irradiance.
-  struct AtPoint {
-    Vec3d direction;
-    Vec3f irradiance;
-    float distance;
-  };
-  AtPoint At(const Vec3d& p_scan) const {
-    if (type == LightType::kDirectional)
-      return {direction, irradiance, std::numeric_limits<float>::infinity()};
-    const Vec3d d = position_mm - p_scan;
-    const double d2 = d.squaredNorm();
-    if (!(d2 > 0)) return {Vec3d::Zero(), Vec3f::Zero(), 0.0f};
-    const double inv = 1.0 / std::sqrt(d2);
-    return {d * inv, intensity * static_cast<float>(inv * inv), static_cast<float>(d2 * inv)};
-  }
-
   Status Validate(const std::string& what) const;
 };
 
